@@ -1,0 +1,30 @@
+# Two entry points for users: `make demo` and `make test`. Both set up a local
+# virtual environment (.venv) on first use, install the project, build the FMU.
+PY ?= python3
+VENV := .venv
+VPY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: all fmu demo test venv clean
+
+all: fmu
+
+$(STAMP): pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(VPY) -m pip install -q --upgrade pip
+	$(VPY) -m pip install -q -e ".[test]"
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+fmu: $(STAMP)
+	$(VPY) -m lss_fmu.build
+
+demo: fmu
+	$(VPY) -m lss_fmu.demo --out demo_out
+
+test: fmu
+	$(VPY) -m pytest -q -p no:cacheprovider tests
+
+clean:
+	rm -rf build demo_out

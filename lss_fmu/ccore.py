@@ -1,0 +1,45 @@
+"""Direct access to the C core (without the FMI layer) through cffi.
+
+Used by tests and benchmarks that need what the FMU does not expose: the track
+frame at any arc length, a single-impact harness for the contact laws, the raw
+cost of the solver. Builds `build/liblsscore.so` from the model sources (all of
+`fmu_src/*.c` except the FMI glue) and the flat API declared in
+`fmu_src/core_api.h`, whose declarations cffi reads as they are.
+"""
+from __future__ import annotations
+
+import re
+from functools import lru_cache
+from pathlib import Path
+
+from cffi import FFI
+
+from . import build
+
+CORE_LIB = build.BUILD / ("liblsscore" + build.shared_suffix())
+
+
+def _cdef_from_header(text: str) -> str:
+    text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+    keep = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    return "\n".join(keep)
+
+
+def _stale(out: Path, inputs: list[Path]) -> bool:
+    return not out.exists() or any(p.stat().st_mtime > out.stat().st_mtime for p in inputs)
+
+
+@lru_cache(maxsize=1)
+def load():
+    """(ffi, lib) for the C core, rebuilt when a source is newer than the library."""
+    build.generate()
+    sources = [p for p in build.model_sources() if p.name != "fmi2_glue.c"] + [build.GEN / "lss_vars.c"]
+    headers = sorted(build.SRC.glob("*.h"))
+    if _stale(CORE_LIB, sources + headers):
+        build.BUILD.mkdir(exist_ok=True)
+        tmp = CORE_LIB.with_suffix(".tmp" + CORE_LIB.suffix)
+        build.compile_shared(tmp, sources)
+        tmp.replace(CORE_LIB)
+    ffi = FFI()
+    ffi.cdef(_cdef_from_header((build.SRC / "core_api.h").read_text()))
+    return ffi, ffi.dlopen(str(CORE_LIB))

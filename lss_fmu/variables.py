@@ -1,0 +1,155 @@
+"""The one table of FMU variables.
+
+`lss_fmu.build` generates both `modelDescription.xml` and the C header
+(`lss_vars.h`: value-reference enum, the parameter and output structs and a
+descriptor table) from this list, so the XML and the C code cannot drift.
+Value references are positions in the list (starting at 1): append new
+variables at the end of their group to keep existing references stable.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Union
+
+Number = Union[int, float, bool, str]
+
+
+@dataclass(frozen=True)
+class Var:
+    name: str
+    type: str                 # Real | Integer | Boolean | String
+    causality: str            # parameter | calculatedParameter | input | output
+    variability: str          # fixed | tunable | continuous | discrete
+    description: str
+    unit: Optional[str] = None
+    start: Optional[Number] = None
+    min: Optional[float] = None
+    max: Optional[float] = None
+
+    @property
+    def field(self) -> str:
+        """C struct field name: dots become underscores."""
+        return self.name.replace(".", "_")
+
+    @property
+    def in_params(self) -> bool:
+        """Parameters and inputs live in LSSParams (set by the master);
+        outputs and calculated parameters in LSSOutputs (set by the model)."""
+        return self.causality in ("parameter", "input")
+
+
+P, CP, IN, OUT = "parameter", "calculatedParameter", "input", "output"
+
+VARIABLES: list[Var] = [
+    # --- layout and configuration -------------------------------------------------
+    Var("layout.name", "String", P, "fixed",
+        "built-in layout (layout1..layout7, demo, oval) or path to a layout file",
+        start="demo"),
+    Var("contact.model", "Integer", P, "fixed",
+        "hysteresis damping law: 1 HC, 2 HW, 3 LW, 4 LN, 5 GZ (exact), 6 FL",
+        start=3, min=1, max=6),
+    Var("contact.e_JA", "Real", P, "fixed", "coefficient of restitution, joint axial",
+        "1", 0.5, 0.0, 1.0),
+    Var("contact.e_JR", "Real", P, "fixed", "coefficient of restitution, joint radial",
+        "1", 0.5, 0.0, 1.0),
+    Var("contact.e_SW", "Real", P, "fixed", "coefficient of restitution, steering wheel",
+        "1", 0.5, 0.0, 1.0),
+    Var("contact.e_RW", "Real", P, "fixed", "coefficient of restitution, driving wheel",
+        "1", 0.5, 0.0, 1.0),
+    Var("contact.v_min", "Real", P, "fixed",
+        "floor of the impact velocity v_i (contacts closed from the start use it)",
+        "m/s", 0.05, 0.0),
+    Var("chain.pretension", "Real", P, "fixed",
+        "pretension d: total stretch of the chain against the track loop", "m", 0.005),
+    Var("wheel.mu_roll", "Real", P, "fixed", "rolling resistance coefficient mu_d",
+        "1", 0.015, 0.0),
+    Var("drive.Kp", "Real", P, "tunable", "proportional gain of the speed controller (thrust per motor)",
+        "N.s/m", 500.0, 0.0),
+    Var("drive.Ki", "Real", P, "tunable", "integral gain of the speed controller (thrust per motor)",
+        "N/m", 200.0, 0.0),
+    Var("drive.F_max", "Real", P, "fixed", "thrust saturation of one linear motor",
+        "N", 400.0, 0.0),
+    Var("drive.motor_length", "Real", P, "fixed", "active length of one linear motor",
+        "m", 0.6, 0.0),
+    Var("drive.v_ref", "Real", IN, "continuous", "chain speed reference v_s",
+        "m/s", 2.0),
+    Var("cart.mass_factor", "Real", P, "fixed",
+        "scales the cart mass and inertia of the layout's cart type", "1", 1.0, 0.0),
+    Var("track.guide_gap", "Real", P, "fixed",
+        "lateral play of each steering wheel against its guide face (negative: preload)",
+        "m", 0.001),
+    Var("chain.v_init", "Real", P, "fixed",
+        "initial chain speed (negative: start at drive.v_ref)", "m/s", -1.0),
+    Var("chain.transducer", "Integer", P, "fixed",
+        "index of the transducer cart in the chain (0 = first cart)", start=0, min=0),
+    Var("solver.tolerance", "Real", P, "fixed",
+        "relative tolerance of the embedded Runge-Kutta pair (fmi2SetupExperiment overrides)",
+        "1", 1e-4, 0.0),
+    Var("solver.h_max", "Real", P, "fixed", "largest internal step", "s", 0.01, 0.0),
+    # --- transducer cart ----------------------------------------------------------
+    Var("transducer.joint.F_x", "Real", OUT, "continuous",
+        "front-joint force on the transducer cart, cart x (forward; positive = tension)", "N"),
+    Var("transducer.joint.F_y", "Real", OUT, "continuous",
+        "front-joint force on the transducer cart, cart y (left)", "N"),
+    Var("transducer.joint.F_z", "Real", OUT, "continuous",
+        "front-joint force on the transducer cart, cart z (up)", "N"),
+    Var("transducer.steering.F_left", "Real", OUT, "continuous",
+        "left steering-wheel lateral contact force", "N"),
+    Var("transducer.steering.F_right", "Real", OUT, "continuous",
+        "right steering-wheel lateral contact force", "N"),
+    Var("transducer.driving.F_left", "Real", OUT, "continuous",
+        "left driving-wheel vertical contact force", "N"),
+    Var("transducer.driving.F_right", "Real", OUT, "continuous",
+        "right driving-wheel vertical contact force", "N"),
+    Var("transducer.wheel.w_sl", "Real", OUT, "continuous", "left steering-wheel speed", "rad/s"),
+    Var("transducer.wheel.w_sr", "Real", OUT, "continuous", "right steering-wheel speed", "rad/s"),
+    Var("transducer.wheel.w_dl", "Real", OUT, "continuous", "left driving-wheel speed", "rad/s"),
+    Var("transducer.wheel.w_dr", "Real", OUT, "continuous", "right driving-wheel speed", "rad/s"),
+    Var("transducer.s", "Real", OUT, "continuous",
+        "arc-length position of the transducer cart's wheel axle on the track", "m"),
+    # --- chain and drive -----------------------------------------------------------
+    Var("chain.v_mean", "Real", OUT, "continuous", "mean tangential speed of the chain", "m/s"),
+    Var("drive.F_total", "Real", OUT, "continuous", "total thrust of all linear motors", "N"),
+    Var("drive.P_total", "Real", OUT, "continuous", "total mechanical power of all linear motors", "W"),
+    Var("drive.F_cmd", "Real", OUT, "continuous",
+        "controller thrust command per motor after saturation", "N"),
+    # --- energy bookkeeping (checks and plant-level use) ---------------------------
+    Var("energy.E_mech", "Real", OUT, "continuous",
+        "kinetic + gravitational + elastic contact energy of the chain", "J"),
+    Var("energy.W_motor", "Real", OUT, "continuous", "work done by the motors since start", "J"),
+    Var("energy.W_damping", "Real", OUT, "continuous",
+        "energy dissipated by contact hysteresis since start", "J"),
+    Var("energy.W_rolling", "Real", OUT, "continuous",
+        "energy dissipated by rolling resistance since start", "J"),
+    # --- solver statistics ------------------------------------------------------
+    Var("solver.n_steps", "Integer", OUT, "discrete", "accepted internal steps since start"),
+    Var("solver.n_rejected", "Integer", OUT, "discrete", "rejected internal steps since start"),
+    Var("solver.h_last", "Real", OUT, "discrete", "last accepted internal step", "s"),
+    Var("solver.n_rhs", "Integer", OUT, "discrete", "right-hand-side evaluations since start"),
+    # --- calculated from layout and parameters -----------------------------------
+    Var("chain.n_carts", "Integer", CP, "fixed", "number of carts in the chain"),
+    Var("track.length", "Real", CP, "fixed", "length of the closed track", "m"),
+    Var("cart.mass", "Real", CP, "fixed", "mass of one cart", "kg"),
+    Var("chain.pitch", "Real", CP, "fixed", "unstretched joint-to-joint length of one cart", "m"),
+    Var("chain.preload", "Real", CP, "fixed",
+        "joint axial preload from the pretension, K_a (d/N)^n", "N"),
+    Var("drive.n_motors", "Integer", CP, "fixed", "number of linear motors"),
+]
+
+BY_NAME = {v.name: v for v in VARIABLES}
+
+
+def value_reference(name: str) -> int:
+    return VARIABLES.index(BY_NAME[name]) + 1
+
+
+CONTACT_MODELS = {"HC": 1, "HW": 2, "LW": 3, "LN": 4, "GZ": 5, "FL": 6}
+FORCE_CHANNELS = [
+    "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
+    "transducer.steering.F_left", "transducer.steering.F_right",
+    "transducer.driving.F_left", "transducer.driving.F_right",
+]
+SPEED_CHANNELS = [
+    "transducer.wheel.w_sl", "transducer.wheel.w_sr",
+    "transducer.wheel.w_dl", "transducer.wheel.w_dr",
+]
