@@ -5,5 +5,48 @@
 #define LSS_CORE_API_H
 
 /* --- track geometry (core_api_track.c) --- */
+/* A parsed layout and its built track behind an opaque handle. open returns
+ * NULL and fills err ("[path: ]line N: ...") on any error; motor_length is the
+ * active length of one linear motor (m), tol_pos (m) and tol_ang (rad) the
+ * closure limits. */
+void *lss_track_open(const char *path, double motor_length, double tol_pos, double tol_ang,
+                     char *err, int errlen);
+void *lss_track_open_text(const char *text, int len, double motor_length, double tol_pos,
+                          double tol_ang, char *err, int errlen);
+void lss_track_close(void *h);
+/* Parse only (no geometry): 0 or non-zero with err filled; n_el gets the element count. */
+int lss_layout_check_text(const char *text, int len, int *n_el, char *err, int errlen);
+double lss_track_length(void *h);
+/* out15: c[3], R[9] row-major (columns t n b), w[3] turn rate in the frame (rad/m) */
+void lss_track_eval(void *h, double s, double *out15);
+void lss_track_eval_many(void *h, const double *s, int n, double *out15n);
+/* closure before correction: dx, dy, dz (m), direction error (rad) */
+void lss_track_closure(void *h, double *out4);
+int lss_track_n_motors(void *h);
+void lss_track_motor(void *h, int k, double *s0s1);
+int lss_track_n_elements(void *h);
+/* kind (1 straight, 2 curve, 3 vcurve, 4 spiral), file line; s0, length */
+void lss_track_element(void *h, int i, int *kind_line, double *s0_len);
+/* ints: wheel char, coupling char, n_motors, n_carts (0: default);
+ * dbls: start x y z (m), heading (rad), cart mass (kg, 0: default) */
+void lss_track_header(void *h, char *name, int namelen, int *ints4, double *dbls5);
+
+/* --- whole chain (core_api_chain.c) --- */
+void *lss_params_new(void);
+void lss_params_free(void *p);
+/* 0 on success; 1 for an unknown name or a name of another type */
+int lss_params_set(void *params, const char *name, double value);
+int lss_params_set_string(void *params, const char *name, const char *value);
+void *lss_chain_new(void *params, const char *resource_dir, char *err, int errlen);
+void lss_chain_free(void *c);
+int lss_chain_step(void *c, double t_end, char *err, int errlen);
+void lss_chain_set_inputs(void *c, void *params);
+int lss_chain_n_carts(void *c);
+int lss_chain_ny(void *c);
+double lss_chain_time(void *c);
+void lss_chain_state(void *c, double *y);
+void lss_chain_contacts(void *c, double *delta, double *ddelta, double *force);
+void lss_chain_outputs(void *c, double *out);
+void lss_chain_stats(void *c, long *out3);
 
 #endif

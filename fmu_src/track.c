@@ -7,6 +7,10 @@
 
 #include "lss_math.h"
 
+#ifndef M_PI /* not declared under -std=c11 */
+#define M_PI 3.14159265358979323846
+#endif
+
 /* Local frame rotation Rl and displacement pl after arc length sigma in an
  * element of turn rate k about unit axis u (element-frame coordinates). */
 static void element_local(const TrackElement *e, double sigma, double *Rl, double *pl) {

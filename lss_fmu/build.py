@@ -138,7 +138,7 @@ def generate_model_description(guid: str, sources: list[str]) -> str:
     units = sorted({v.unit for v in VARIABLES if v.unit})
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            "<fmiModelDescription", '  fmiVersion="2.0"', f'  modelName="{MODEL_ID}"',
-           f'  guid="{guid}"',
+           f'  guid="{{{guid}}}"',
            '  description="Loop-sorter chain of 6-DOF carts with Hunt-Crossley point contacts '
            'in a closed 3D track, driven by PI-controlled linear motors"',
            '  generationTool="lss_fmu.build"', '  variableNamingConvention="structured"',
@@ -234,6 +234,8 @@ def build_fmu(out: Path = FMU_PATH, quiet: bool = False) -> Path:
         digest.update(p.name.encode())
         digest.update(p.read_bytes())
     guid = str(uuid.UUID(digest.hexdigest()[:32]))
+    write_if_changed(GEN / "lss_guid.h", f'/* Generated: the GUID of this build. */\n#define LSS_GUID "{{{guid}}}"\n')
+    headers.append(GEN / "lss_guid.h")
     BUILD.mkdir(exist_ok=True)
     with tempfile.TemporaryDirectory(dir=BUILD) as tmp:
         lib = Path(tmp) / (MODEL_ID + shared_suffix())
@@ -249,7 +251,7 @@ def build_fmu(out: Path = FMU_PATH, quiet: bool = False) -> Path:
                 z.write(p, "resources/" + p.relative_to(SRC / "resources").as_posix())
         os.replace(tmp_fmu, out)  # atomic: a reader never sees half an FMU
     if not quiet:
-        print(f"built {out} ({out.stat().st_size // 1024} KiB, guid {guid})")
+        print(f"built {out} ({out.stat().st_size // 1024} KiB)")
     return out
 
 

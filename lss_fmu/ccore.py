@@ -38,7 +38,7 @@ def load():
     if _stale(CORE_LIB, sources + headers):
         build.BUILD.mkdir(exist_ok=True)
         tmp = CORE_LIB.with_suffix(".tmp" + CORE_LIB.suffix)
-        build.compile_shared(tmp, sources)
+        build.compile_shared(tmp, sources, extra=["-fvisibility=default"])
         tmp.replace(CORE_LIB)
     ffi = FFI()
     ffi.cdef(_cdef_from_header((build.SRC / "core_api.h").read_text()))

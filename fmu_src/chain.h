@@ -1,0 +1,156 @@
+/* The chain of carts: the immutable model (built once from the parameters)
+ * and the mutable state (everything a step changes, so that copying the state
+ * is what fmi2GetFMUstate needs). The FMI glue sees only this header.
+ *
+ * State vector y: per cart i, at 13*i: r[3] (CG, world), q[4] (orientation
+ * quaternion w,x,y,z, body->world), v[3] (world), w[3] (body angular rate);
+ * then the globals at 13*N: PI integrator, motor work, damping loss,
+ * rolling loss. Body frame: x forward, y left, z up, origin at the CG.
+ * Cart i+1 runs ahead of cart i; cart i's front joint meets cart i+1's rear
+ * joint, and cart N-1's front joint meets cart 0's rear joint. */
+#ifndef LSS_CHAIN_H
+#define LSS_CHAIN_H
+
+#include <stddef.h>
+
+#include "contact.h"
+#include "dopri5.h"
+#include "lss_alloc.h"
+#include "lss_vars.h"
+#include "track.h"
+
+#define CART_NY 13
+#define G_INT 0     /* PI integrator, m */
+#define G_WMOT 1    /* motor work, J */
+#define G_WDAMP 2   /* hysteresis loss, J */
+#define G_WROLL 3   /* rolling loss, J */
+#define N_GLOBAL 4
+
+enum { CC_JA = 0, CC_JR, CC_SW, CC_RW, CC_N };          /* contact classes */
+enum { W_SL = 0, W_SR, W_DL, W_DR, N_WHEEL };          /* wheels of one cart */
+/* Contact slots per cart: 0 joint axial, 1 joint radial (of its front joint),
+ * 2..5 the wheels in W_* order. */
+#define SLOT_JA 0
+#define SLOT_JR 1
+#define SLOT_WHEEL 2
+#define N_SLOT 6
+
+typedef struct {
+    double mass, inertia[3];          /* kg, principal moments kg m^2 (body axes) */
+    double pitch;                     /* unstretched joint-to-joint length, m */
+    double x_axle, z_axle;            /* wheel axle position (body), m */
+    double z_joint;                   /* height of both joints (body), m */
+    double y_drive, r_drive;          /* driving wheels: lateral offset, radius */
+    double y_steer, z_steer, r_steer; /* steering wheels: lateral offset, height, radius */
+    double guide_half;                /* lateral position of each guide face (track frame), m */
+    double x_motor, z_motor;          /* motor reaction point (body), m */
+    double plate_length;              /* length of the motor reaction plate, m */
+} CartGeometry;
+
+typedef struct {
+    char wheel, coupling;
+    double mass;                      /* kg */
+    double K_drive, n_drive, K_steer, n_steer, r_drive, r_steer;
+    double K_axial, n_axial, K_radial, n_radial;
+} CartType;
+
+/* Parameters of the wheel/coupling type; returns 0 for an unknown type. */
+int cart_type_lookup(char wheel, char coupling, CartType *out);
+
+typedef struct ChainModel {
+    LSSAlloc alloc;
+    Track track;
+    char layout_name[64];
+    int n_carts, transducer, n_y;
+    CartGeometry g;
+    CartType type;
+    ContactLaw law[CC_N];
+    int law_code;
+    double v_min, mu_roll, F_max, motor_length, pretension, preload, gravity;
+    double tol, h_max;
+    double *err_scale;                /* per state: absolute scale of the error norm */
+    double *err_rel;                  /* per state: 1 if the error is also relative to |y| */
+} ChainModel;
+
+/* Per-contact quantities of the latest right-hand-side evaluation. */
+typedef struct {
+    double *delta, *ddelta;           /* [N_SLOT*N] indentation and its rate */
+    double *force;                    /* [N_SLOT*N] contact force magnitude */
+    double *R;                        /* [9*N] rotation of each cart */
+    double *wworld;                   /* [3*N] angular velocity, world */
+    double *F, *T;                    /* [3*N] force and torque (world, about the CG) */
+    double *s;                        /* [N] projected axle arc length */
+    double *sdot;                     /* [N] its rate, m/s */
+    TrackFrame *frame;                /* [N] track frame at the axle */
+    int *el;                          /* [N] element hint of each cart */
+    double *v_t;                      /* [N] tangential speed of each axle */
+    double *wheel_speed;              /* [N_WHEEL*N] rad/s */
+    double jointF[3];                 /* front-joint force on the transducer cart, its body frame */
+    double v_mean, F_cmd, F_total, P_total;
+    long n_rhs;
+} ChainScratch;
+
+typedef struct ChainState {
+    DopriState ode;                   /* time, step size, counters, FSAL validity */
+    double *y;                        /* [n_y] */
+    double *s_hint;                   /* [N] projection warm start (accepted steps only) */
+    double *v_onset;                  /* [N_SLOT*N] onset velocity, 0 when the contact is open */
+    double *delta_prev, *ddelta_prev; /* [N_SLOT*N] at the last accepted point */
+    double v_ref, Kp, Ki;             /* inputs and tunables in force */
+} ChainState;
+
+typedef struct {
+    ChainModel m;
+    ChainState st;
+    ChainScratch sc;
+    Dopri ode;                        /* solver set-up and workspace */
+    double *dy_scratch;               /* [n_y] for evaluations outside the solver */
+    int scratch_at_state;             /* the scratch describes st.y as it is now */
+} Chain;
+
+/* Builds the chain from validated parameters: layout, carts, initial state.
+ * resource_dir locates built-in layouts (may be NULL). Returns NULL with a
+ * message in err on failure; never aborts. */
+Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc *a,
+                    char *err, size_t errlen);
+void chain_free(Chain *c);
+
+/* Checks the values of the parameters (ranges, finiteness, codes); returns 0
+ * or a message naming the variable and the value. */
+int chain_check_params(const LSSParams *p, char *err, size_t errlen);
+
+/* Adopts the tunable parameters and inputs (v_ref, Kp, Ki). */
+void chain_set_inputs(Chain *c, const LSSParams *p);
+
+/* Sets up the solver (tolerance, error scales, callbacks, workspace). */
+void chain_solver_init(Chain *c);
+
+/* Integrates to t_end, landing on it exactly.
+ * 0: ok; 1: the state turned non-finite or the step collapsed (discard). */
+int chain_step(Chain *c, double t_end, char *err, size_t errlen);
+
+/* Fills the outputs from the current state. */
+void chain_outputs(Chain *c, LSSOutputs *out);
+
+/* Right-hand side dy = f(t, y); fills the scratch. */
+void chain_rhs(Chain *c, double t, const double *y, double *dy);
+
+/* State snapshot for get/set/serialise FMU state. */
+size_t chain_state_size(const Chain *c);
+void chain_state_save(const Chain *c, double *buf);
+void chain_state_load(Chain *c, const double *buf);
+
+/* Helpers shared by the chain's files. */
+void cart_geometry_init(CartGeometry *g, const CartType *t, double pitch, double guide_gap,
+                        double mass_factor);
+int chain_initial_state(Chain *c, double v0, char *err, size_t errlen);
+int chain_load_layout(const char *name, const char *resource_dir, LayoutSpec *spec,
+                      const LSSAlloc *a, char *err, size_t errlen);
+
+/* Motor thrust fraction of a cart whose reaction plate is centred at arc
+ * length s_plate: sum over motors of overlap / motor length. */
+double drive_overlap(const ChainModel *m, double s_plate);
+/* PI controller: thrust command per motor and the integrator derivative. */
+double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot);
+
+#endif

@@ -1,0 +1,63 @@
+/* The outputs: the transducer cart's eleven signals, the chain and drive
+ * quantities, the energy bookkeeping and the solver statistics. */
+#include "chain_internal.h"
+
+static double mechanical_energy(const Chain *c) {
+    const ChainModel *m = &c->m;
+    const ChainScratch *sc = &c->sc;
+    const double *I = m->g.inertia;
+    double E = 0.0;
+    for (int i = 0; i < m->n_carts; i++) {
+        const double *yi = c->st.y + CART_NY * i, *v = yi + 7, *w = yi + 10;
+        E += 0.5 * m->g.mass * v3_dot(v, v);
+        E += 0.5 * (I[0] * w[0] * w[0] + I[1] * w[1] * w[1] + I[2] * w[2] * w[2]);
+        E += m->g.mass * m->gravity * yi[2];
+        const double *d = sc->delta + N_SLOT * i;
+        E += contact_energy(&m->law[CC_JA], d[SLOT_JA]) + contact_energy(&m->law[CC_JR], d[SLOT_JR]);
+        for (int k = 0; k < N_WHEEL; k++)
+            E += contact_energy(&m->law[(k == W_DL || k == W_DR) ? CC_RW : CC_SW], d[SLOT_WHEEL + k]);
+    }
+    return E;
+}
+
+void chain_outputs(Chain *c, LSSOutputs *o) {
+    const ChainModel *m = &c->m;
+    const ChainScratch *sc = &c->sc;
+    if (!c->scratch_at_state) {
+        chain_rhs(c, c->st.ode.t, c->st.y, c->dy_scratch);
+        c->scratch_at_state = 1;
+    }
+    int tr = m->transducer;
+    const double *f = sc->force + N_SLOT * tr + SLOT_WHEEL, *ws = sc->wheel_speed + N_WHEEL * tr;
+    o->transducer_joint_F_x = sc->jointF[0];
+    o->transducer_joint_F_y = sc->jointF[1];
+    o->transducer_joint_F_z = sc->jointF[2];
+    o->transducer_steering_F_left = f[W_SL];
+    o->transducer_steering_F_right = f[W_SR];
+    o->transducer_driving_F_left = f[W_DL];
+    o->transducer_driving_F_right = f[W_DR];
+    o->transducer_wheel_w_sl = ws[W_SL];
+    o->transducer_wheel_w_sr = ws[W_SR];
+    o->transducer_wheel_w_dl = ws[W_DL];
+    o->transducer_wheel_w_dr = ws[W_DR];
+    o->transducer_s = sc->s[tr];
+    o->chain_v_mean = sc->v_mean;
+    o->drive_F_total = sc->F_total;
+    o->drive_P_total = sc->P_total;
+    o->drive_F_cmd = sc->F_cmd;
+    const double *gl = c->st.y + CART_NY * m->n_carts;
+    o->energy_E_mech = mechanical_energy(c);
+    o->energy_W_motor = gl[G_WMOT];
+    o->energy_W_damping = gl[G_WDAMP];
+    o->energy_W_rolling = gl[G_WROLL];
+    o->solver_n_steps = (int)c->st.ode.n_steps;
+    o->solver_n_rejected = (int)c->st.ode.n_rejected;
+    o->solver_h_last = c->st.ode.h_last;
+    o->solver_n_rhs = (int)(c->st.ode.n_rhs > 2147483647L ? 2147483647L : c->st.ode.n_rhs);
+    o->chain_n_carts = m->n_carts;
+    o->track_length = m->track.length;
+    o->cart_mass = m->g.mass;
+    o->chain_pitch = m->g.pitch;
+    o->chain_preload = m->preload;
+    o->drive_n_motors = m->track.n_motors;
+}

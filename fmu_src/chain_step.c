@@ -1,0 +1,70 @@
+/* Time stepping of the chain: the generic Dormand-Prince solver with the
+ * chain's right-hand side, and what happens after every accepted step: the
+ * contact memory (onset velocities) is updated, the projection warm starts
+ * advance, and drifting quaternions are renormalised. */
+#include <stdio.h>
+
+#include "chain_internal.h"
+
+/* A contact that closed within the step gets its onset velocity, interpolated
+ * at the crossing; an open one forgets. Returns 1 if anything changed. */
+static int update_contact_memory(Chain *c) {
+    ChainState *st = &c->st;
+    const ChainScratch *sc = &c->sc;
+    int changed = 0, n = N_SLOT * c->m.n_carts;
+    for (int k = 0; k < n; k++) {
+        double d1 = sc->delta[k], dd1 = sc->ddelta[k];
+        if (d1 > 0) {
+            if (!(st->v_onset[k] > 0)) {
+                double d0 = st->delta_prev[k], dd0 = st->ddelta_prev[k];
+                double th = (d0 < 0 && d1 > d0) ? d0 / (d0 - d1) : 1.0;
+                double v = (1 - th) * dd0 + th * dd1;
+                st->v_onset[k] = v > c->m.v_min ? v : c->m.v_min;
+                changed = 1;
+            }
+        } else if (st->v_onset[k] > 0) {
+            st->v_onset[k] = 0.0;
+            changed = 1;
+        }
+        st->delta_prev[k] = d1;
+        st->ddelta_prev[k] = dd1;
+    }
+    return changed;
+}
+
+static void rhs(void *ctx, double t, const double *y, double *dy) { chain_rhs(ctx, t, y, dy); }
+
+static int accepted(void *ctx, double t, double *y) {
+    Chain *c = ctx;
+    int changed = 0;
+    (void)t;
+    for (int i = 0; i < c->m.n_carts; i++) {
+        double *q = y + CART_NY * i + 3;
+        double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        if (fabs(nq - 1.0) > 1e-9) {  /* rare: the rotation is normalised anyway */
+            for (int j = 0; j < 4; j++) q[j] /= nq;
+            changed = 1;
+        }
+        c->st.s_hint[i] = c->sc.s[i];
+    }
+    /* the scratch holds the last stage, evaluated at the new point */
+    return update_contact_memory(c) || changed;
+}
+
+void chain_solver_init(Chain *c) {
+    Dopri *d = &c->ode;
+    d->n = c->m.n_y;
+    d->rhs = rhs;
+    d->accepted = accepted;
+    d->ctx = c;
+    d->scale = c->m.err_scale;
+    d->rel = c->m.err_rel;
+    d->tol = c->m.tol;
+    d->h_max = c->m.h_max;
+}
+
+int chain_step(Chain *c, double t_end, char *err, size_t errlen) {
+    int r = dopri_integrate(&c->ode, &c->st.ode, c->st.y, t_end, err, errlen);
+    c->scratch_at_state = (r == 0);
+    return r;
+}

@@ -1,0 +1,35 @@
+/* Dormand-Prince 5(4) with PI step-size control, landing exactly on a given
+ * end time. Generic over the right-hand side so that the chain and the
+ * single-impact harness of the contact-law checks use the very same solver. */
+#ifndef LSS_DOPRI5_H
+#define LSS_DOPRI5_H
+
+#include <stddef.h>
+
+typedef struct {
+    int n;
+    void (*rhs)(void *ctx, double t, const double *y, double *dy);
+    /* after each accepted step, with y the new state; returns 1 if it changed
+     * y or the right-hand side (the FSAL derivative is then recomputed) */
+    int (*accepted)(void *ctx, double t, double *y);
+    void *ctx;
+    const double *scale;   /* error scale per component: tol * (scale + rel * |y|) */
+    const double *rel;
+    double tol, h_max;
+    double *k[7], *ytmp, *ynew;  /* workspace, n each */
+} Dopri;
+
+typedef struct {
+    double t, h, err_prev, h_last;
+    int fsal_valid;          /* k[0] holds f(t, y) */
+    long n_steps, n_rejected, n_rhs;
+} DopriState;
+
+void dopri_reset(DopriState *s, double t0, double h0);
+
+/* Integrates y from s->t to t_end. 0: ok; 1: non-finite state or collapsed
+ * step (err filled). k[0] and the last right-hand side evaluation are at
+ * (t_end, y) on return. */
+int dopri_integrate(Dopri *d, DopriState *s, double *y, double t_end, char *err, size_t errlen);
+
+#endif

@@ -1,0 +1,457 @@
+"""Complex-RFP: the Complex-RF method evaluating several candidates per round.
+
+A *round* is one batch of objective evaluations sent at once to an executor
+(a ``concurrent.futures`` pool, a dask client through :func:`dask_map`, or any
+``map_fn(fn, xs) -> results``).  Two strategies:
+
+``strategy="speculative"`` (default) - task prediction.  The serial method is
+run as a state machine; before each round the machine is copied and played
+forward along the most probable outcomes (the pending candidate is accepted /
+is still the worst, with acceptance rates measured during the run), and the
+``n_parallel`` most probable future candidates are evaluated at once: the
+pending reflection, its retractions, the next iteration's reflection if the
+pending one is accepted, and so on.  The real machine then consumes the
+results for as long as its actual requests were among them.  Because every
+random perturbation is keyed by (iteration, step) the candidates are pure
+functions of the state, so a speculated point is used only if it is exactly
+the point the serial method asks for: the run is *identical* to
+:func:`identification.complex_rf.minimize_complex` with the same seed (same
+used points, values, result), whatever ``n_parallel`` and the executor, and
+only the wall-clock rounds drop.  Mispredicted evaluations are recorded in the
+history as ``discarded``; ``max_evals`` limits the evaluations used.
+
+``strategy="multidirection"`` - the ``n_parallel`` worst points (at most half
+the complex) are reflected at once, each through the centroid of the points
+not being moved, and each move retracts in later rounds as in the serial
+method until its candidate beats the worst unmoved point.  Fewer rounds on
+easy problems, but it is a different search (less robust on narrow valleys,
+see docs/complex_rf.md) and does not reproduce the serial run.
+"""
+
+from __future__ import annotations
+
+import copy
+import heapq
+import math
+import os
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .complex_rf import (
+    DEFAULT_ALPHA,
+    DEFAULT_GAMMA,
+    DEFAULT_MAX_RETRACTIONS,
+    DEFAULT_RETRACT_DECAY,
+    DEFAULT_RFAK,
+    SafeObjective,
+    _build_result,
+    _check_options,
+    _check_x0,
+    _Recorder,
+    _seed_repr,
+    check_convergence,
+    forget,
+    forgetting_constant,
+    initial_complex,
+    intermediate,
+    is_worst,
+    make_rng,
+    parse_bounds,
+    random_term,
+    reflect,
+    retract,
+    run_key,
+    worst_index,
+    x_spread,
+)
+from .optim_result import STATUS_CALLBACK, STATUS_MAX_EVALS, ComplexResult
+
+__all__ = ["minimize_complex_parallel", "dask_map", "STRATEGIES"]
+
+STRATEGIES = ("speculative", "multidirection")
+
+MapFn = Callable[[Callable[[Any], Any], Sequence[Any]], Iterable[Any]]
+
+
+def dask_map(client: Any, pure: bool = False) -> MapFn:
+    """A ``map_fn`` evaluating a batch on a ``dask.distributed.Client``.
+
+    ``pure=False`` (default) keeps dask from merging tasks with equal inputs.
+    """
+
+    def _map(fn: Callable[[Any], Any], xs: Sequence[Any]) -> list[Any]:
+        futures = client.map(fn, list(xs), pure=pure)
+        return client.gather(futures)
+
+    return _map
+
+
+def _cpu_count() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - non-Linux
+        return os.cpu_count() or 1
+
+
+@dataclass(frozen=True)
+class _Ctx:
+    """Immutable settings shared by the state machine and its copies."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    span: np.ndarray
+    k: int
+    alpha: float
+    rfak: float
+    kf: float
+    f_tol: float
+    x_tol: float
+    decay: float
+    max_ret: int
+    max_evals: int
+    base: int
+
+
+class _Machine:
+    """The serial Complex-RF loop as a state machine (same steps as minimize_complex).
+
+    ``request()`` returns the next point the method wants evaluated (or None
+    when it has stopped, ``status`` set); ``feed(f)`` gives it that point's value
+    and returns ``(accepted, iteration_ended)``.
+    """
+
+    def __init__(self, ctx: _Ctx, X: np.ndarray, F: np.ndarray):
+        self.ctx = ctx
+        self.X = X.copy()
+        self.F = F.copy()
+        self.R = F.copy()
+        self.birth = np.arange(ctx.k, dtype=np.int64)
+        self.n_path = ctx.k
+        self.nit = 0
+        self.active = False
+        self.w = self.b = self.q = 0
+        self.xc: np.ndarray | None = None
+        self.xnew: np.ndarray | None = None
+        self.kind = ""
+        self.status: int | None = None
+
+    def clone(self) -> "_Machine":
+        c = copy.copy(self)
+        c.X, c.F, c.R, c.birth = self.X.copy(), self.F.copy(), self.R.copy(), self.birth.copy()
+        return c  # xc / xnew are replaced, never modified in place: sharing is safe
+
+    def request(self) -> np.ndarray | None:
+        if self.status is not None:
+            return None
+        if not self.active:
+            c = self.ctx
+            conv = check_convergence(self.X, self.F, c.span, c.f_tol, c.x_tol)
+            if conv is not None:
+                self.status = conv
+                return None
+            if self.n_path >= c.max_evals:
+                self.status = STATUS_MAX_EVALS
+                return None
+            self.nit += 1
+            forget(self.R, c.kf)
+            self.w = w = worst_index(self.R, self.birth)
+            self.b = int(np.argmin(self.R))
+            self.xc = (self.X.sum(axis=0) - self.X[w]) / (c.k - 1)
+            noise = random_term(c.base, self.nit, -1, c.rfak, c.span, x_spread(self.X, c.span))
+            self.xnew = reflect(self.xc, self.X[w], c.alpha, noise, c.lo, c.hi)
+            self.kind, self.q, self.active = "reflect", 0, True
+        return self.xnew
+
+    def feed(self, f: float) -> tuple[bool, bool]:
+        c, w = self.ctx, self.w
+        self.X[w] = self.xnew
+        self.F[w] = self.R[w] = f
+        self.birth[w] = self.n_path
+        self.n_path += 1
+        if not is_worst(self.R, w):
+            self.active = False
+            return True, True
+        if self.q >= c.max_ret or self.n_path >= c.max_evals:
+            self.active = False
+            return False, True
+        noise = random_term(c.base, self.nit, self.q, c.rfak, c.span, x_spread(self.X, c.span))
+        self.xnew = retract(self.xc, self.X[self.b], self.xnew, self.q, c.decay, noise, c.lo, c.hi)
+        self.kind = "retract"
+        self.q += 1
+        return False, False
+
+    def accept_guess(self) -> float | None:
+        """A value the pending candidate is accepted with, for forecasting: the
+        median of the others (so the best and the next worst stay as they are)."""
+        others = np.delete(self.R, self.w)
+        fin = others[np.isfinite(others)]
+        if fin.size == 0:
+            return 0.0
+        guess = float(np.median(fin))
+        return guess if guess < others.max() else None
+
+
+def _speculate(root: _Machine, n_slots: int, cache: dict[bytes, int], f_of: Callable[[int], float],
+               p_accept: dict[str, float]) -> list[tuple[np.ndarray, str, int]]:
+    """The ``n_slots`` most probable future requests of ``root`` not yet evaluated."""
+    batch: list[tuple[np.ndarray, str, int]] = []
+    in_batch: set[bytes] = set()
+    tie = 0
+    heap: list[tuple[float, int, _Machine]] = [(-1.0, tie, root.clone())]
+    while heap and len(batch) < n_slots:
+        neg_p, _, st = heapq.heappop(heap)
+        prob = -neg_p
+        x = st.xnew
+        assert x is not None
+        key = x.tobytes()
+        if key in cache:  # already evaluated: follow the actual outcome
+            child = st.clone()
+            child.feed(f_of(cache[key]))
+            if child.request() is not None:
+                tie += 1
+                heapq.heappush(heap, (-prob, tie, child))
+            continue
+        if key not in in_batch:
+            batch.append((x, st.kind, st.nit))
+            in_batch.add(key)
+        pa = p_accept[st.kind]
+        guess = st.accept_guess()
+        if guess is not None:
+            child = st.clone()
+            child.feed(guess)
+            if child.request() is not None:
+                tie += 1
+                heapq.heappush(heap, (-prob * pa, tie, child))
+        child = st.clone()
+        child.feed(math.inf)
+        if child.request() is not None:
+            tie += 1
+            heapq.heappush(heap, (-prob * (1.0 - pa), tie, child))
+    return batch
+
+
+@dataclass
+class _Move:
+    """Multi-direction: one Complex-RF iteration on point ``w`` in progress."""
+
+    w: int
+    xc: np.ndarray
+    iteration: int
+    q: int = 0
+    fresh: bool = True
+    done: bool = False
+
+
+def _unmoved(k: int, moved: Sequence[int]) -> np.ndarray:
+    mask = np.ones(k, dtype=bool)
+    mask[list(moved)] = False
+    return np.flatnonzero(mask)
+
+
+def minimize_complex_parallel(
+    fun: Callable[..., float],
+    bounds: Any,
+    x0: Any = None,
+    *,
+    args: tuple = (),
+    n_parallel: int | None = None,
+    strategy: str = "speculative",
+    executor: Any = None,
+    map_fn: MapFn | None = None,
+    n_points: int | None = None,
+    alpha: float = DEFAULT_ALPHA,
+    rfak: float = DEFAULT_RFAK,
+    gamma: float = DEFAULT_GAMMA,
+    max_evals: int = 5000,
+    f_tol: float = 1e-6,
+    x_tol: float = 1e-4,
+    seed: Any = None,
+    callback: Callable[[Any], Any] | None = None,
+    progress: bool = False,
+    retract_decay: float = DEFAULT_RETRACT_DECAY,
+    max_retractions: int = DEFAULT_MAX_RETRACTIONS,
+) -> ComplexResult:
+    """Complex-RF with up to ``n_parallel`` objective evaluations per round.
+
+    Same parameters and result as :func:`identification.complex_rf.minimize_complex`, plus:
+
+    n_parallel : evaluations per round. Default: the executor's worker count if
+        it exposes one, else the number of usable CPUs.
+    strategy : ``"speculative"`` (default; reproduces the serial run exactly) or
+        ``"multidirection"`` (see the module docstring).
+    executor : a :class:`concurrent.futures.Executor`; batches go through
+        ``executor.map``. With a process pool ``fun`` and ``args`` must be picklable.
+    map_fn : instead of ``executor``: ``map_fn(fn, xs)`` returning the results in
+        order, e.g. ``dask_map(client)``. With neither, the batch is evaluated in
+        this process, one point after the other (same run, no speed-up).
+
+    ``result.nrounds`` counts the rounds (batches, including the initial complex).
+    ``result.nfev`` counts every evaluation, ``result.nfev_used`` those the method
+    used (``<= max_evals``); ``history.discarded`` marks mispredicted ones.
+    Errors of the executor itself (e.g. a broken process pool) propagate;
+    errors of ``fun`` are bad points.
+    """
+    if executor is not None and map_fn is not None:
+        raise ValueError("give either executor or map_fn, not both")
+    if strategy not in STRATEGIES:
+        raise ValueError(f"strategy = {strategy!r} must be one of {STRATEGIES}")
+    lo, hi = parse_bounds(bounds)
+    m = lo.size
+    x0a = _check_x0(x0, lo, hi)
+    k = _check_options(m, n_points, alpha, rfak, gamma, max_evals, f_tol, x_tol,
+                       retract_decay, max_retractions)
+    max_evals = int(max_evals)
+    if n_parallel is None:
+        n_parallel = int(getattr(executor, "_max_workers", 0) or _cpu_count())
+    p = int(n_parallel)
+    if p < 1:
+        raise ValueError(f"n_parallel = {n_parallel!r} must be >= 1")
+
+    span = hi - lo
+    rng = make_rng(seed)
+    safe = SafeObjective(fun, args)
+    rec = _Recorder(m, max_evals, progress, f"Complex-RFP x{p}")
+
+    def run_batch(xs: list[np.ndarray]) -> list[tuple[float, bool, str | None]]:
+        if not xs:
+            return []
+        if map_fn is not None:
+            out = list(map_fn(safe, xs))
+        elif executor is not None:
+            out = list(executor.map(safe, xs))
+        else:
+            out = [safe(x) for x in xs]
+        if len(out) != len(xs):
+            raise RuntimeError(f"map returned {len(out)} results for {len(xs)} points")
+        return [(float(f), bool(bad), err) for f, bad, err in out]
+
+    try:
+        X = initial_complex(rng, k, lo, hi, x0a)
+        F = np.empty(k)
+        for i, out in enumerate(run_batch([X[i] for i in range(k)])):
+            idx = rec.record(X[i], out, "init", 0, i // p)
+            rec.accept(idx)
+            F[i] = out[0]
+        rounds = -(-k // p)
+        rec.iteration_row(0, rounds - 1, F, X, span)
+        ctx = _Ctx(lo=lo, hi=hi, span=span, k=k, alpha=alpha, rfak=rfak,
+                   kf=forgetting_constant(alpha, gamma, k), f_tol=f_tol, x_tol=x_tol,
+                   decay=retract_decay, max_ret=int(max_retractions), max_evals=max_evals,
+                   base=run_key(rng))
+        run = _run_speculative if strategy == "speculative" else _run_multidirection
+        X, F, nit, rounds, status = run(ctx, X, F, rec, run_batch, p, rounds, callback)
+    finally:
+        rec.close()
+
+    return _build_result(rec, X, F, nit, rounds, status, dict(
+        method=f"complex-rfp/{strategy}", n_points=k, alpha=alpha, rfak=rfak, gamma=gamma,
+        max_evals=max_evals, f_tol=f_tol, x_tol=x_tol, seed=_seed_repr(seed),
+        retract_decay=retract_decay, max_retractions=int(max_retractions), n_parallel=p))
+
+
+def _run_speculative(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, run_batch: Callable,
+                     p: int, rounds: int, callback: Callable | None):
+    machine = _Machine(ctx, X, F)
+    cache: dict[bytes, int] = {}  # evaluated point -> evaluation index
+    counts = {"reflect": [1, 2], "retract": [1, 2]}  # accepted, tried (prior 1/2)
+    status = STATUS_MAX_EVALS
+
+    def f_of(idx: int) -> float:
+        return rec.rows_f[idx]
+
+    while True:
+        # consume every evaluated point the method asks for, in its own order
+        while True:
+            x = machine.request()
+            if x is None:
+                break
+            idx = cache.get(x.tobytes())
+            if idx is None:
+                break
+            rec.use(idx)
+            kind = machine.kind
+            accepted, ended = machine.feed(f_of(idx))
+            counts[kind][0] += accepted
+            counts[kind][1] += 1
+            if accepted:
+                rec.accept(idx)
+            if ended:
+                rec.iteration_row(machine.nit, rounds - 1, machine.F, machine.X, ctx.span)
+                if callback is not None and callback(intermediate(rec, machine.nit, machine.F)) is True:
+                    return machine.X, machine.F, machine.nit, rounds, STATUS_CALLBACK
+        if x is None:
+            status = machine.status if machine.status is not None else STATUS_MAX_EVALS
+            break
+        p_accept = {kd: a / n for kd, (a, n) in counts.items()}
+        batch = _speculate(machine, p, cache, f_of, p_accept)
+        for (xb, kind, it), out in zip(batch, run_batch([b[0] for b in batch])):
+            cache[xb.tobytes()] = rec.record(xb, out, kind, it, rounds, discarded=True)
+        rounds += 1
+    return machine.X, machine.F, machine.nit, rounds, status
+
+
+def _run_multidirection(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, run_batch: Callable,
+                        p: int, rounds: int, callback: Callable | None):
+    k, span = ctx.k, ctx.span
+    d = max(1, min(p, k // 2))
+    R = F.copy()
+    birth = np.arange(k, dtype=np.int64)
+    nit = started = 0
+    moves: list[_Move] = []
+    status = STATUS_MAX_EVALS
+    while True:
+        n_new = d - len(moves)
+        if n_new > 0:
+            conv = check_convergence(X, F, span, ctx.f_tol, ctx.x_tol)
+            if conv is not None:
+                status = conv
+                break
+        budget = ctx.max_evals - rec.nfev
+        if budget <= 0:
+            break
+        for _ in range(n_new):
+            forget(R, ctx.kf)
+            w = worst_index(R, birth, exclude=[mv.w for mv in moves])
+            xc = X[_unmoved(k, [mv.w for mv in moves] + [w])].mean(axis=0)
+            started += 1
+            moves.append(_Move(w=w, xc=xc, iteration=started))
+        b = int(np.argmin(R))
+        plan: list[tuple[_Move, np.ndarray, str]] = []
+        for mv in moves[:budget]:
+            if mv.fresh:
+                noise = random_term(ctx.base, mv.iteration, -1, ctx.rfak, span, x_spread(X, span))
+                x = reflect(mv.xc, X[mv.w], ctx.alpha, noise, ctx.lo, ctx.hi)
+                plan.append((mv, x, "reflect"))
+            else:
+                noise = random_term(ctx.base, mv.iteration, mv.q, ctx.rfak, span, x_spread(X, span))
+                x = retract(mv.xc, X[b], X[mv.w], mv.q, ctx.decay, noise, ctx.lo, ctx.hi)
+                plan.append((mv, x, "retract"))
+        for (mv, x, kind), out in zip(plan, run_batch([pl[1] for pl in plan])):
+            idx = rec.record(x, out, kind, mv.iteration, rounds)
+            w = mv.w
+            X[w] = x
+            F[w] = R[w] = out[0]
+            birth[w] = idx
+            if kind == "retract":
+                mv.q += 1
+            mv.fresh = False
+            # accepted when better than the worst unmoved point (serial: than the
+            # worst of the others), so a move never trades a good point for a
+            # candidate that only beats other moves' pending candidates
+            if R[w] < R[_unmoved(k, [o.w for o in moves if not o.done])].max():
+                rec.accept(idx)
+                mv.done = True
+            elif mv.q >= ctx.max_ret:
+                mv.done = True  # left in the complex, as in the serial method
+        done = sum(mv.done for mv in moves)
+        nit += done
+        moves = [mv for mv in moves if not mv.done]
+        rec.iteration_row(nit, rounds, F, X, span)
+        rounds += 1
+        if callback is not None and callback(intermediate(rec, nit, F)) is True:
+            status = STATUS_CALLBACK
+            break
+    return X, F, nit, rounds, status

@@ -1,0 +1,225 @@
+"""Run LSSChain.fmu through fmpy, fast and repeatedly.
+
+`ChainSimulator` extracts the FMU once, instantiates it once and reuses the
+instance with `fmi2Reset` for every run; outputs are read through pre-built
+ctypes arrays so the per-communication-point overhead stays small. Every FMU
+message is collected, and an FMU error becomes a `SimulationError` carrying
+the FMU's own words.
+"""
+from __future__ import annotations
+
+import atexit
+import ctypes
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Mapping, Optional, Sequence
+
+import numpy as np
+import pandas as pd
+from fmpy import calloc as fmpy_calloc, extract, free as fmpy_free, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real, fmi2ValueReference)
+
+from . import build
+from .variables import BY_NAME, FORCE_CHANNELS, SPEED_CHANNELS
+
+DEFAULT_OUTPUTS = FORCE_CHANNELS + SPEED_CHANNELS + ["transducer.s", "chain.v_mean"]
+
+
+class SimulationError(RuntimeError):
+    """The FMU refused a value or a run failed; the message is the FMU's."""
+
+
+@dataclass
+class RunInfo:
+    n_steps: int
+    n_rejected: int
+    n_rhs: int
+    h_last: float
+    messages: list
+
+
+def fmu_path(path: Optional[Path] = None) -> Path:
+    """The FMU to use: the given one, or build/LSSChain.fmu (built if missing)."""
+    if path is not None:
+        p = Path(path)
+        if not p.exists():
+            raise FileNotFoundError(f"FMU not found: {p}")
+        return p
+    if not build.FMU_PATH.exists():
+        build.build_fmu(quiet=True)
+    return build.FMU_PATH
+
+
+class ChainSimulator:
+    """One FMU instance, reused for many runs."""
+
+    def __init__(self, path: Optional[Path] = None, instance_name: str = "lss", logging_on: bool = False):
+        self.path = fmu_path(path)
+        self.md = read_model_description(str(self.path))
+        self._unzipdir = extract(str(self.path))
+        atexit.register(shutil.rmtree, self._unzipdir, True)
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self.messages: list[tuple[int, str, str]] = []
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy_calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy_free)
+        try:
+            from fmpy.logging import addLoggerProxy
+            addLoggerProxy(ctypes.byref(self._callbacks))
+        except Exception:  # pragma: no cover - fmpy without its native logger proxy
+            pass
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier,
+                             instanceName=instance_name)
+        self.fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
+        self._used = False
+        self._closed = False
+
+    # -- messages ---------------------------------------------------------------
+    def _log(self, env, instance, status, category, message):
+        self.messages.append((int(status), (category or b"").decode(errors="replace"),
+                              (message or b"").decode(errors="replace")))
+
+    def _fail(self, what: str, exc: Exception) -> SimulationError:
+        errs = [m for s, _, m in self.messages if s >= 2]
+        detail = errs[-1] if errs else str(exc)
+        return SimulationError(f"{what}: {detail}")
+
+    # -- values --------------------------------------------------------------------
+    def vr(self, name: str) -> int:
+        try:
+            return self.variables[name].valueReference
+        except KeyError:
+            close = [n for n in self.variables if name.split(".")[-1] in n]
+            hint = f" (did you mean {', '.join(close[:4])}?)" if close else ""
+            raise KeyError(f"the FMU has no variable '{name}'{hint}") from None
+
+    def set(self, name: str, value) -> None:
+        v = self.variables.get(name)
+        if v is None:
+            self.vr(name)
+        try:
+            if v.type == "Real":
+                self.fmu.setReal([v.valueReference], [float(value)])
+            elif v.type == "Integer":
+                self.fmu.setInteger([v.valueReference], [int(value)])
+            elif v.type == "Boolean":
+                self.fmu.setBoolean([v.valueReference], [bool(value)])
+            else:
+                self.fmu.setString([v.valueReference], [str(value)])
+        except FMICallException as exc:
+            raise self._fail(f"cannot set {name} = {value!r}", exc) from None
+
+    def get(self, name: str):
+        v = self.variables.get(name) or self.variables[self.vr(name)]
+        getter = {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger,
+                  "Boolean": self.fmu.getBoolean, "String": self.fmu.getString}[v.type]
+        try:
+            val = getter([v.valueReference])[0]
+        except FMICallException as exc:
+            raise self._fail(f"cannot read {name}", exc) from None
+        return val.decode() if isinstance(val, bytes) else val
+
+    # -- runs ----------------------------------------------------------------------
+    def start(self, params: Optional[Mapping[str, object]] = None, tolerance: Optional[float] = None,
+              start_time: float = 0.0) -> None:
+        """Reset (if used), set parameters, initialise."""
+        self.messages.clear()
+        if self._used:
+            self.fmu.reset()
+        self._used = True
+        try:
+            for name, value in (params or {}).items():
+                self.set(name, value)
+            self.fmu.setupExperiment(tolerance=tolerance, startTime=start_time)
+            self.fmu.enterInitializationMode()
+            self.fmu.exitInitializationMode()
+        except FMICallException as exc:
+            raise self._fail("initialisation failed", exc) from None
+        self.time = start_time
+
+    def step(self, h: float) -> None:
+        try:
+            self.fmu.doStep(self.time, h)
+        except FMICallException as exc:
+            raise self._fail(f"step from t = {self.time:g} s failed", exc) from None
+        self.time += h
+
+    def simulate(self, stop_time: float, step: float = 1.0 / 300.0,
+                 params: Optional[Mapping[str, object]] = None, outputs: Sequence[str] = DEFAULT_OUTPUTS,
+                 tolerance: Optional[float] = None, start_time: float = 0.0,
+                 on_step: Optional[Callable[["ChainSimulator", float], None]] = None,
+                 record_from: float = -np.inf) -> pd.DataFrame:
+        """Simulate from start_time to stop_time and return the outputs at every
+        communication point (a DataFrame with a 'time' column). `on_step(sim, t)`
+        is called before each step (to change inputs at a communication point)."""
+        if not (stop_time > start_time) or not np.isfinite(stop_time):
+            raise ValueError(f"stop_time = {stop_time} must be finite and after start_time = {start_time}")
+        if not (step > 0):
+            raise ValueError(f"step = {step} must be positive")
+        self.start(params, tolerance, start_time)
+        n = int(round((stop_time - start_time) / step))
+        vrs = [self.vr(o) for o in outputs]
+        types = {self.variables[o].type for o in outputs}
+        if types - {"Real"}:
+            raise ValueError("simulate() records Real outputs only")
+        nv = len(vrs)
+        c_vr = (fmi2ValueReference * nv)(*vrs)
+        c_val = (fmi2Real * nv)()
+        get_real = self.fmu.fmi2GetReal
+        do_step = self.fmu.fmi2DoStep
+        comp = self.fmu.component
+        data = np.empty((n + 1, nv))
+        times = start_time + step * np.arange(n + 1)
+        try:
+            get_real(comp, c_vr, nv, c_val)
+            data[0] = c_val
+            t = start_time
+            for k in range(1, n + 1):
+                if on_step is not None:
+                    on_step(self, t)
+                t_next = times[k]
+                do_step(comp, t, t_next - t, 1)
+                t = t_next
+                get_real(comp, c_vr, nv, c_val)
+                data[k] = c_val
+        except FMICallException as exc:
+            self.time = t
+            raise self._fail(f"simulation failed after t = {t:g} s", exc) from None
+        self.time = t
+        keep = times >= record_from - 1e-12
+        df = pd.DataFrame(data[keep], columns=list(outputs))
+        df.insert(0, "time", times[keep])
+        return df
+
+    def info(self) -> RunInfo:
+        return RunInfo(self.get("solver.n_steps"), self.get("solver.n_rejected"), self.get("solver.n_rhs"),
+                       self.get("solver.h_last"), list(self.messages))
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            try:
+                self.fmu.terminate()
+            except Exception:
+                pass
+            self.fmu.freeInstance()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def simulate(layout: str = "demo", stop_time: float = 10.0, step: float = 1.0 / 300.0,
+             params: Optional[Mapping[str, object]] = None, outputs: Iterable[str] = DEFAULT_OUTPUTS,
+             tolerance: Optional[float] = None) -> pd.DataFrame:
+    """One simulation in a fresh instance (for scripts; loops should reuse a ChainSimulator)."""
+    p = {"layout.name": layout, **(params or {})}
+    with ChainSimulator() as sim:
+        return sim.simulate(stop_time, step, p, list(outputs), tolerance)
