@@ -50,8 +50,9 @@ int chain_check_params(const LSSParams *p, char *err, size_t errlen) {
         snprintf(err, errlen, "chain.transducer = %d is invalid: must be >= 0", p->chain_transducer);
         return 1;
     }
-    if (!(p->solver_tolerance > 0.0 && p->solver_tolerance <= 0.1))
-        return bad(err, errlen, "solver.tolerance", p->solver_tolerance, "must lie in (0, 0.1]");
+    if (!(p->solver_tolerance >= 1e-12 && p->solver_tolerance <= 0.1))
+        return bad(err, errlen, "solver.tolerance", p->solver_tolerance,
+                   "must lie in [1e-12, 0.1] (below 1e-12 the solver stalls in double precision)");
     if (!(p->solver_h_max > 0.0 && p->solver_h_max <= 1.0))
         return bad(err, errlen, "solver.h_max", p->solver_h_max, "must lie in (0, 1] s");
     return 0;

@@ -40,21 +40,21 @@ static void orient(double *R, const double *e, const double *u) {
 
 /* March N carts with assembled pitch p from the rear joint J0 of cart 0,
  * whose axle sits at s = 0. Returns the closure miss along the start tangent
- * and the front joint of the last cart in JN. Fills s, R (9N) and J (3(N+1))
+ * and the front joint of the last cart in JN (cart 0's axle at s_start). Fills s, R (9N) and J (3(N+1))
  * when given. An error in J0 shrinks by a factor |1 - p/ell| ~ 0.2 per cart,
  * so JN hardly depends on it: J0 is found by a fixed point. */
-static double march(const Assembly *as, const CartGeometry *g, int N, double p, const double *J0,
-                    double *JN, double *s_out, double *R_out, double *J_out) {
+static double march(const Assembly *as, const CartGeometry *g, int N, double p, double s_start,
+                    const double *J0, double *JN, double *s_out, double *R_out, double *J_out) {
     double dx = g->x_axle + 0.5 * p, dz = g->z_axle - g->z_joint;
     double ell = sqrt(dx * dx + dz * dz);
     double e[3] = {dx / ell, 0.0, dz / ell};
     int hint = 0;
     TrackFrame f;
     double A[3], J[3], t0[3], R[9];
-    axle_target(as, 0.0, &hint, A, &f);
+    axle_target(as, s_start, &hint, A, &f);
     m3_col(t0, f.R, 0);
     v3_copy(J, J0);
-    double s = 0.0, L = as->track->length;
+    double s = s_start, L = as->track->length;
     for (int i = 0; i < N; i++) {
         if (i > 0) {
             /* the axle point at distance ell from J, ahead of the previous one */
@@ -91,11 +91,12 @@ static double march(const Assembly *as, const CartGeometry *g, int N, double p, 
 
 /* The rear joint of cart 0 consistent with a closing joint JN: on the sphere
  * of radius ell around cart 0's axle, towards JN. */
-static void start_joint(const Assembly *as, const CartGeometry *g, double p, const double *JN, double *J0) {
+static void start_joint(const Assembly *as, const CartGeometry *g, double p, double s_start, const double *JN,
+                        double *J0) {
     double dx = g->x_axle + 0.5 * p, dz = g->z_axle - g->z_joint, ell = sqrt(dx * dx + dz * dz);
     TrackFrame f;
     double A[3], d[3];
-    axle_target(as, 0.0, NULL, A, &f);
+    axle_target(as, s_start, NULL, A, &f);
     v3_sub(d, JN, A);
     v3_scale(d, d, ell / v3_norm(d));
     v3_add(J0, A, d);
@@ -121,26 +122,29 @@ int chain_initial_state(Chain *c, double v0, char *err, size_t errlen) {
         v3_copy(J0, A);
         v3_axpy(J0, -dx, t);  /* first guess: behind the axle along the tangent */
     }
-    double f0 = march(&as, g, N, p0, J0, JN, NULL, NULL, NULL);
-    start_joint(&as, g, p0, JN, J0);
-    double f1 = march(&as, g, N, p1, J0, JN, NULL, NULL, NULL);
+    double f0 = march(&as, g, N, p0, 0.0, J0, JN, NULL, NULL, NULL);
+    start_joint(&as, g, p0, 0.0, JN, J0);
+    double f1 = march(&as, g, N, p1, 0.0, J0, JN, NULL, NULL, NULL);
     for (int it = 0; it < 60; it++) {
-        start_joint(&as, g, p1, JN, J0);
+        start_joint(&as, g, p1, 0.0, JN, J0);
         if (fabs(f1) <= 1e-11 * m->track.length && it > 1) break;
         if (f1 == f0) break;
         double p2 = p1 - f1 * (p1 - p0) / (f1 - f0);
         p0 = p1; f0 = f1;
         p1 = p2;
-        f1 = march(&as, g, N, p1, J0, JN, NULL, NULL, NULL);
+        f1 = march(&as, g, N, p1, 0.0, J0, JN, NULL, NULL, NULL);
     }
     if (!isfinite(p1) || fabs(f1) > 1e-6 || p1 <= 0) {
         snprintf(err, errlen, "cannot assemble %d carts into the %.6g m track (closure miss %.3g m)",
                  N, m->track.length, f1);
         return 1;
     }
-    double *s = a->calloc((size_t)N, sizeof(double));
-    double *R = a->calloc((size_t)N * 9, sizeof(double));
-    double *J = a->calloc((size_t)(N + 1) * 3, sizeof(double));
+    /* poses at the start and shifted by +-eps along the track: the central
+     * difference gives velocities that agree at every joint */
+    const double eps = 1e-4;
+    double *s = a->calloc((size_t)N * 3, sizeof(double));
+    double *R = a->calloc((size_t)N * 27, sizeof(double));
+    double *J = a->calloc((size_t)(N + 1) * 9, sizeof(double));
     if (!s || !R || !J) {
         if (s) a->free(s);
         if (R) a->free(R);
@@ -148,7 +152,15 @@ int chain_initial_state(Chain *c, double v0, char *err, size_t errlen) {
         snprintf(err, errlen, "out of memory assembling %d carts", N);
         return 1;
     }
-    march(&as, g, N, p1, J0, JN, s, R, J);
+    for (int k = 0; k < 3; k++) {
+        double sh = k == 0 ? 0.0 : (k == 1 ? eps : -eps), J0k[3], JNk[3];
+        v3_copy(J0k, J0);
+        if (k > 0) {
+            march(&as, g, N, p1, sh, J0, JNk, NULL, NULL, NULL);
+            start_joint(&as, g, p1, sh, JNk, J0k);
+        }
+        march(&as, g, N, p1, sh, J0k, JNk, s + (size_t)N * k, R + (size_t)9 * N * k, J + (size_t)3 * (N + 1) * k);
+    }
     double p = p1 - m->pretension / N;
     if (!(p > 0.5 * p1)) {
         snprintf(err, errlen, "chain.pretension = %g m is too large for %d carts", m->pretension, N);
@@ -157,24 +169,29 @@ int chain_initial_state(Chain *c, double v0, char *err, size_t errlen) {
     }
     g->pitch = p;
     g->plate_length = p1;
-    int hint = 0;
     for (int i = 0; i < N; i++) {
-        double *yi = st->y + CART_NY * i, *Ri = R + 9 * i;
-        /* CG: midway between the assembled joints, below the joint line */
-        double mid[3], off[3], bo[3] = {0, 0, -g->z_joint};
-        v3_add(mid, J + 3 * i, J + 3 * (i + 1));
-        v3_scale(mid, mid, 0.5);
-        m3_mulv(off, Ri, bo);
-        v3_add(yi, mid, off);
-        m3_to_quat(yi + 3, Ri);
-        TrackFrame f;
-        track_frame(&m->track, s[i], &hint, &f);
-        double x[3], wt[3];
-        m3_col(x, Ri, 0);
-        v3_scale(yi + 7, x, v0);
-        m3_mulv(wt, f.R, f.w);            /* turn rate per metre, world */
-        v3_scale(wt, wt, v0);
-        m3_tmulv(yi + 10, Ri, wt);        /* body angular rate */
+        double *yi = st->y + CART_NY * i, r[3][3];
+        for (int k = 0; k < 3; k++) {
+            /* CG: midway between the assembled joints, below the joint line */
+            const double *Jk = J + (size_t)3 * (N + 1) * k, *Rk = R + (size_t)9 * N * k + 9 * i;
+            double mid[3], off[3], bo[3] = {0, 0, -g->z_joint};
+            v3_add(mid, Jk + 3 * i, Jk + 3 * (i + 1));
+            v3_scale(mid, mid, 0.5);
+            m3_mulv(off, Rk, bo);
+            v3_add(r[k], mid, off);
+        }
+        const double *R0 = R + 9 * i, *Rp = R + (size_t)9 * N + 9 * i, *Rm = R + (size_t)18 * N + 9 * i;
+        v3_copy(yi, r[0]);
+        m3_to_quat(yi + 3, R0);
+        for (int c3 = 0; c3 < 3; c3++) yi[7 + c3] = v0 * (r[1][c3] - r[2][c3]) / (2 * eps);
+        /* angular velocity from Rp Rm^T = I + [2 eps w/v0]x + O(eps^2) */
+        double D[9], Rmt[9], ww[3];
+        for (int u = 0; u < 3; u++)
+            for (int w = 0; w < 3; w++) Rmt[3 * u + w] = Rm[3 * w + u];
+        m3_mul(D, Rp, Rmt);
+        v3_set(ww, 0.5 * (D[7] - D[5]), 0.5 * (D[2] - D[6]), 0.5 * (D[3] - D[1]));
+        v3_scale(ww, ww, v0 / (2 * eps));
+        m3_tmulv(yi + 10, R0, ww);
         st->s_hint[i] = s[i];
     }
     a->free(s); a->free(R); a->free(J);

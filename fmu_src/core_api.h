@@ -49,4 +49,28 @@ void lss_chain_contacts(void *c, double *delta, double *ddelta, double *force);
 void lss_chain_outputs(void *c, double *out);
 void lss_chain_stats(void *c, long *out3);
 
+/* --- single impact (core_api_impact.c) --- */
+/* One body of mass m (kg) approaching a Hunt-Crossley contact (law 1..6,
+ * restitution e, stiffness K in N/m^n, exponent n) at v_i (m/s), with the
+ * onset floor v_min (m/s), integrated by the chain's DOPRI5 with the chain's
+ * onset-memory rule at tolerance tol. 0 on success, else err is filled.
+ * opts (nopts entries, may be NULL; NaN = default): 0 h_max (s; default the
+ * natural time ds/v_i, ds the elastic peak indentation), 1 error scale of the
+ * indentation (m; default ds), 2 error scale of the rate (m/s; default v_i),
+ * 3 relative error weight of the rate (default 0), 4 onset rule (0 the
+ * chain's linear interpolation, 1 cubic Hermite), 5 start gap (m; 0.1 ds).
+ * out (nout entries, NaN if unset): 0 v_out/v_in, 1 v_in, 2 v_out, 3 peak
+ * force (N), 4 contact duration (s), 5 largest indentation (m), 6 chi(e),
+ * 7 accepted steps, 8 rejected steps, 9 right-hand sides, 10 onset time (s),
+ * 11 trace rows written, 12 the onset velocity the contact remembered (m/s).
+ * trace (4 * trace_max, may be NULL): t, delta, delta_dot, force at the start
+ * and after every accepted step. */
+int lss_impact_run(int law, double e, double K, double n, double m, double v_i, double v_min, double tol,
+                   const double *opts, int nopts, double *out, int nout, double *trace, int trace_max,
+                   char *err, int errlen);
+/* contact.c as it is: chi(e) of a law, the exact chi(e), its inverse */
+double lss_contact_chi(int law, double e);
+double lss_contact_chi_exact(double e);
+double lss_contact_restitution_of_chi(double chi);
+
 #endif

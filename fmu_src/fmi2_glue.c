@@ -36,8 +36,15 @@ typedef struct {
     double start_time, time;
     int tolerance_defined;
     double tolerance;
+    int stop_time_defined;
+    double stop_time;
     char string_out[LSS_STRING_MAX];
 } Instance;
+
+/* Below this relative tolerance the Runge-Kutta pair cannot make progress in
+ * double precision (1e-16 already needs ~1e5 steps per 10 ms); a smaller
+ * tolerance from fmi2SetupExperiment is raised to it with a warning. */
+#define TOL_FLOOR 1e-12
 
 /* --- logging --------------------------------------------------------------- */
 
@@ -163,7 +170,6 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
         LOG_ERROR(in, "fmi2SetDebugLogging: categories is NULL but nCategories = %zu", nCategories);
         return fmi2Error;
     }
-    in->log_all = loggingOn ? 1 : 0;
     for (size_t i = 0; i < nCategories; i++) {
         const char *k = categories[i];
         if (!k || (strcmp(k, "logStatusError") && strcmp(k, "logStatusWarning") &&
@@ -172,6 +178,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
             return fmi2Error;
         }
     }
+    in->log_all = loggingOn ? 1 : 0;  /* only once the call is known to be valid */
     return fmi2OK;
 }
 
@@ -179,11 +186,15 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     (void)visible;
-    if (!functions || !functions->allocateMemory || !functions->freeMemory) return NULL;
+    if (!functions) return NULL;  /* nobody to tell */
     Instance tmp;  /* for logging before the instance exists */
     memset(&tmp, 0, sizeof tmp);
     tmp.cb = *functions;
     snprintf(tmp.name, sizeof tmp.name, "%s", instanceName ? instanceName : "");
+    if (!functions->allocateMemory || !functions->freeMemory) {
+        LOG_ERROR(&tmp, "fmi2Instantiate: the callback functions allocateMemory and freeMemory are required");
+        return NULL;
+    }
     if (!instanceName || !instanceName[0]) {
         LOG_ERROR(&tmp, "fmi2Instantiate: instanceName must be a non-empty string");
         return NULL;
@@ -240,11 +251,21 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
         LOG_ERROR(in, "fmi2SetupExperiment: tolerance = %g must lie in (0, 0.1]", tolerance);
         return fmi2Error;
     }
+    fmi2Status status = fmi2OK;
+    if (toleranceDefined && tolerance < TOL_FLOOR) {
+        logmsg(in, fmi2Warning, "logStatusWarning",
+               "fmi2SetupExperiment: tolerance = %g is below %g, the smallest the solver can honour in "
+               "double precision; using %g", tolerance, TOL_FLOOR, TOL_FLOOR);
+        tolerance = TOL_FLOOR;
+        status = fmi2Warning;
+    }
     in->tolerance_defined = toleranceDefined ? 1 : 0;
     in->tolerance = tolerance;
+    in->stop_time_defined = stopTimeDefined ? 1 : 0;
+    in->stop_time = stopTimeDefined ? stopTime : 0.0;
     in->start_time = in->time = startTime;
     in->chain_stale = 1;
-    return fmi2OK;
+    return status;
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
@@ -274,6 +295,8 @@ fmi2Status fmi2Reset(fmi2Component c) {
     lss_params_defaults(&in->p);
     in->state = ST_INSTANTIATED;
     in->tolerance_defined = 0;
+    in->stop_time_defined = 0;
+    in->stop_time = 0.0;
     in->start_time = in->time = 0.0;
     in->chain_stale = 1;
     return fmi2OK;
@@ -472,6 +495,15 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         LOG_ERROR(in, "fmi2DoStep: currentCommunicationPoint = %.17g but the FMU is at t = %.17g", t, in->time);
         return fmi2Error;
     }
+    if (in->stop_time_defined && t + h > in->stop_time + 1e-9 * (fabs(in->stop_time) + 1.0)) {
+        LOG_ERROR(in, "fmi2DoStep: a step from t = %.17g by %.17g s goes past stopTime = %.17g "
+                  "given to fmi2SetupExperiment", t, h, in->stop_time);
+        return fmi2Error;
+    }
+    if (!in->chain || in->chain_stale) {  /* cannot happen through a valid call sequence */
+        LOG_ERROR(in, "fmi2DoStep: the chain was not built (internal state inconsistent); call fmi2Reset");
+        return fmi2Error;
+    }
     char err[512];
     if (chain_step(in->chain, t + h - in->start_time, err, sizeof err) != 0) {
         in->state = ST_STEP_FAILED;
@@ -495,41 +527,49 @@ fmi2Status fmi2CancelStep(fmi2Component c) {
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
     CHECK(c, "fmi2GetStatus", ST_ANY);
     (void)s; (void)value;
-    LOG_ERROR(in, "fmi2GetStatus: no asynchronous step is pending");
+    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetStatus: no asynchronous step is pending");
     return fmi2Discard;
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
     CHECK(c, "fmi2GetRealStatus", ST_ANY);
-    if (s == fmi2LastSuccessfulTime && value) {
+    if (!value) {
+        LOG_ERROR(in, "fmi2GetRealStatus: value is NULL");
+        return fmi2Error;
+    }
+    if (s == fmi2LastSuccessfulTime) {
         *value = in->time;
         return fmi2OK;
     }
-    LOG_ERROR(in, "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
     return fmi2Discard;
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
     CHECK(c, "fmi2GetIntegerStatus", ST_ANY);
     (void)s; (void)value;
-    LOG_ERROR(in, "fmi2GetIntegerStatus: no integer status is available");
+    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetIntegerStatus: no integer status is available");
     return fmi2Discard;
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
     CHECK(c, "fmi2GetBooleanStatus", ST_ANY);
-    if (s == fmi2Terminated && value) {
+    if (!value) {
+        LOG_ERROR(in, "fmi2GetBooleanStatus: value is NULL");
+        return fmi2Error;
+    }
+    if (s == fmi2Terminated) {
         *value = fmi2False;  /* the model never asks to stop */
         return fmi2OK;
     }
-    LOG_ERROR(in, "fmi2GetBooleanStatus: only fmi2Terminated is available");
+    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetBooleanStatus: only fmi2Terminated is available");
     return fmi2Discard;
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
     CHECK(c, "fmi2GetStringStatus", ST_ANY);
     (void)s; (void)value;
-    LOG_ERROR(in, "fmi2GetStringStatus: no string status is available");
+    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetStringStatus: no string status is available");
     return fmi2Discard;
 }
 
@@ -561,7 +601,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 /* --- FMU state ----------------------------------------------------------------- */
 
 #define SNAP_MAGIC 0x4C5353434841494EULL /* "LSSCHAIN" */
-#define SNAP_VERSION 1
+#define SNAP_VERSION 2
 
 typedef struct {
     unsigned long long magic;
@@ -569,10 +609,11 @@ typedef struct {
     int state;
     int has_chain;
     int tolerance_defined;
-    double tolerance, start_time, time;
+    int stop_time_defined;
+    double tolerance, start_time, time, stop_time;
     size_t n;               /* doubles in the chain snapshot */
     LSSParams p;
-    LSSParams built;        /* parameters the chain was built with */
+    LSSParams built;        /* parameters the chain was built with (tolerance applied) */
 } SnapHeader;
 
 typedef struct {
@@ -580,18 +621,91 @@ typedef struct {
     double data[];
 } Snapshot;
 
+static int is_snapshot(const void *s) {
+    const SnapHeader *h = s;
+    return h->magic == SNAP_MAGIC && h->version == SNAP_VERSION;
+}
+
+/* Do two parameter sets give chains of the same structure (all fixed
+ * parameters equal, bit for bit)? Tunables and inputs are re-applied. */
+static int same_structure(const LSSParams *a, const LSSParams *b) {
+    for (int vr = 1; vr <= LSS_N_VARS; vr++) {
+        const LSSVarInfo *v = &LSS_VARS[vr];
+        if (!v->in_params || v->variability != LSS_FIXED) continue;
+        const char *x = (const char *)a + v->offset, *y = (const char *)b + v->offset;
+        if (v->type == LSS_STRING ? strcmp(x, y) != 0
+                                  : memcmp(x, y, v->type == LSS_REAL ? sizeof(double) : sizeof(int)) != 0)
+            return 0;
+    }
+    return 1;
+}
+
+static int params_terminated(const LSSParams *p) {
+    for (int vr = 1; vr <= LSS_N_VARS; vr++) {
+        const LSSVarInfo *v = &LSS_VARS[vr];
+        if (v->in_params && v->type == LSS_STRING && !memchr((const char *)p + v->offset, 0, LSS_STRING_MAX))
+            return 0;
+    }
+    return 1;
+}
+
+static int valid_state(int s) {
+    return s == ST_INSTANTIATED || s == ST_INIT || s == ST_STEP_COMPLETE || s == ST_STEP_FAILED ||
+           s == ST_TERMINATED || s == ST_ERROR;
+}
+
+/* Is the header usable (it may come from bytes handed in by the master)?
+ * 0, or 1 with the reason in why. */
+static int check_header(const SnapHeader *h, char *why, size_t len) {
+    char err[512];
+    if (!is_snapshot(h)) {
+        snprintf(why, len, "not an LSSChain FMU state of this version");
+        return 1;
+    }
+    if (!valid_state(h->state) || (h->has_chain != 0 && h->has_chain != 1) ||
+        (h->tolerance_defined != 0 && h->tolerance_defined != 1) ||
+        (h->stop_time_defined != 0 && h->stop_time_defined != 1)) {
+        snprintf(why, len, "corrupt FMU state: flags out of range");
+        return 1;
+    }
+    if ((h->has_chain != 0) != (h->n != 0) ||
+        (!h->has_chain && (h->state & (ST_STEP_COMPLETE | ST_STEP_FAILED)))) {
+        snprintf(why, len, "corrupt FMU state: a state in %s without the chain's state", state_name(h->state));
+        return 1;
+    }
+    if (!isfinite(h->start_time) || !isfinite(h->time) || (h->stop_time_defined && !isfinite(h->stop_time)) ||
+        (h->tolerance_defined && !(h->tolerance >= TOL_FLOOR && h->tolerance <= 0.1))) {
+        snprintf(why, len, "corrupt FMU state: non-finite time or tolerance out of range");
+        return 1;
+    }
+    if (!params_terminated(&h->p) || !params_terminated(&h->built)) {
+        snprintf(why, len, "corrupt FMU state: unterminated string parameter");
+        return 1;
+    }
+    if (chain_check_params(&h->p, err, sizeof err) || (h->has_chain && chain_check_params(&h->built, err, sizeof err))) {
+        snprintf(why, len, "FMU state with invalid parameters: %s", err);
+        return 1;
+    }
+    return 0;
+}
+
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     CHECK(c, "fmi2GetFMUstate", ST_ANY);
     if (!FMUstate) {
         LOG_ERROR(in, "fmi2GetFMUstate: FMUstate is NULL");
         return fmi2Error;
     }
+    Snapshot *s = *FMUstate;
+    if (s && !is_snapshot(s)) {
+        LOG_ERROR(in, "fmi2GetFMUstate: *FMUstate is neither NULL nor an LSSChain FMU state");
+        return fmi2Error;
+    }
     int has = in->chain && !in->chain_stale;
     size_t n = has ? chain_state_size(in->chain) : 0;
-    Snapshot *s = *FMUstate;
     if (s && s->h.n != n) {  /* an old snapshot of another size: replace it */
         in->cb.freeMemory(s);
         s = NULL;
+        *FMUstate = NULL;
     }
     if (!s) s = in->cb.allocateMemory(1, sizeof(SnapHeader) + n * sizeof(double));
     if (!s) {
@@ -604,41 +718,60 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     s->h.has_chain = has;
     s->h.tolerance_defined = in->tolerance_defined;
     s->h.tolerance = in->tolerance;
+    s->h.stop_time_defined = in->stop_time_defined;
+    s->h.stop_time = in->stop_time;
     s->h.start_time = in->start_time;
     s->h.time = in->time;
     s->h.n = n;
     s->h.p = in->p;
-    if (has) {
-        s->h.built = in->p;
-        chain_state_save(in->chain, s->data);
-    }
+    s->h.built = in->p;
+    if (in->tolerance_defined) s->h.built.solver_tolerance = in->tolerance;
+    if (has) chain_state_save(in->chain, s->data);
     *FMUstate = s;
     return fmi2OK;
 }
 
+/* All or nothing: on an error the instance is left as it was. */
 static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
-    if (s->h.magic != SNAP_MAGIC || s->h.version != SNAP_VERSION) {
-        LOG_ERROR(in, "%s: not an LSSChain FMU state", fn);
+    char why[600];
+    if (check_header(&s->h, why, sizeof why)) {
+        LOG_ERROR(in, "%s: %s", fn, why);
         return fmi2Error;
+    }
+    Chain *fresh = NULL;
+    if (s->h.has_chain) {
+        LSSParams now = in->p;
+        if (in->tolerance_defined) now.solver_tolerance = in->tolerance;
+        int same = in->chain && !in->chain_stale && chain_state_size(in->chain) == s->h.n &&
+                   same_structure(&now, &s->h.built);
+        if (!same) {  /* build a chain of the snapshot's structure, then load its state */
+            char err[1024];
+            fresh = chain_create(&s->h.built, in->has_resources ? in->resource_dir : NULL, &in->alloc, err,
+                                 sizeof err);
+            if (!fresh) {
+                LOG_ERROR(in, "%s: cannot rebuild the chain of the FMU state: %s", fn, err);
+                return fmi2Error;
+            }
+            if (chain_state_size(fresh) != s->h.n) {
+                chain_free(fresh);
+                LOG_ERROR(in, "%s: the FMU state does not fit the chain it describes", fn);
+                return fmi2Error;
+            }
+        }
+    }
+    /* from here on nothing fails */
+    if (fresh) {
+        chain_free(in->chain);
+        in->chain = fresh;
     }
     in->p = s->h.p;
     in->tolerance_defined = s->h.tolerance_defined;
     in->tolerance = s->h.tolerance;
+    in->stop_time_defined = s->h.stop_time_defined;
+    in->stop_time = s->h.stop_time;
     in->start_time = s->h.start_time;
     in->time = s->h.time;
     if (s->h.has_chain) {
-        /* rebuild the chain's structure when it differs, then load its state */
-        int same = in->chain && !in->chain_stale && chain_state_size(in->chain) == s->h.n &&
-                   memcmp(&in->p, &s->h.built, sizeof(LSSParams)) == 0;
-        if (!same) {
-            in->p = s->h.built;
-            if (build_chain(in) != fmi2OK) return fmi2Error;
-            in->p = s->h.p;
-        }
-        if (chain_state_size(in->chain) != s->h.n) {
-            LOG_ERROR(in, "%s: the FMU state does not fit this chain", fn);
-            return fmi2Error;
-        }
         chain_state_load(in->chain, s->data);
         chain_set_inputs(in->chain, &in->p);
         in->chain_stale = 0;
@@ -665,7 +798,14 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
         LOG_ERROR(in, "fmi2FreeFMUstate: FMUstate is NULL");
         return fmi2Error;
     }
-    if (*FMUstate) in->cb.freeMemory(*FMUstate);
+    if (*FMUstate && !is_snapshot(*FMUstate)) {
+        LOG_ERROR(in, "fmi2FreeFMUstate: *FMUstate is not an LSSChain FMU state; not freed");
+        return fmi2Error;
+    }
+    if (*FMUstate) {
+        ((Snapshot *)*FMUstate)->h.magic = 0;  /* poisoned: a stale copy of the pointer is not a state */
+        in->cb.freeMemory(*FMUstate);
+    }
     *FMUstate = NULL;
     return fmi2OK;
 }
@@ -674,6 +814,10 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
     CHECK(c, "fmi2SerializedFMUstateSize", ST_ANY);
     if (!FMUstate || !size) {
         LOG_ERROR(in, "fmi2SerializedFMUstateSize: NULL argument");
+        return fmi2Error;
+    }
+    if (!is_snapshot(FMUstate)) {
+        LOG_ERROR(in, "fmi2SerializedFMUstateSize: not an LSSChain FMU state");
         return fmi2Error;
     }
     const Snapshot *s = FMUstate;
@@ -685,6 +829,10 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
     CHECK(c, "fmi2SerializeFMUstate", ST_ANY);
     if (!FMUstate || !serializedState) {
         LOG_ERROR(in, "fmi2SerializeFMUstate: NULL argument");
+        return fmi2Error;
+    }
+    if (!is_snapshot(FMUstate)) {
+        LOG_ERROR(in, "fmi2SerializeFMUstate: not an LSSChain FMU state");
         return fmi2Error;
     }
     const Snapshot *s = FMUstate;
@@ -704,15 +852,23 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         LOG_ERROR(in, "fmi2DeSerializeFMUstate: NULL argument");
         return fmi2Error;
     }
+    if (*FMUstate && !is_snapshot(*FMUstate)) {
+        LOG_ERROR(in, "fmi2DeSerializeFMUstate: *FMUstate is neither NULL nor an LSSChain FMU state");
+        return fmi2Error;
+    }
     SnapHeader h;
     if (size < sizeof h) {
         LOG_ERROR(in, "fmi2DeSerializeFMUstate: %zu bytes is too short for an LSSChain FMU state", size);
         return fmi2Error;
     }
     memcpy(&h, serializedState, sizeof h);
-    if (h.magic != SNAP_MAGIC || h.version != SNAP_VERSION || h.n > (size - sizeof h) / sizeof(double) ||
-        size != sizeof h + h.n * sizeof(double)) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: the bytes are not an LSSChain FMU state of this version");
+    if (!is_snapshot(&h) || h.n > (size - sizeof h) / sizeof(double) || size != sizeof h + h.n * sizeof(double)) {
+        LOG_ERROR(in, "fmi2DeSerializeFMUstate: the %zu bytes are not an LSSChain FMU state of this version", size);
+        return fmi2Error;
+    }
+    char why[600];
+    if (check_header(&h, why, sizeof why)) {
+        LOG_ERROR(in, "fmi2DeSerializeFMUstate: %s", why);
         return fmi2Error;
     }
     Snapshot *s = in->cb.allocateMemory(1, size);
@@ -721,10 +877,10 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         return fmi2Error;
     }
     memcpy(s, serializedState, size);
-    /* strings inside the parameters must be terminated */
-    s->h.p.layout_name[LSS_STRING_MAX - 1] = '\0';
-    s->h.built.layout_name[LSS_STRING_MAX - 1] = '\0';
-    if (*FMUstate) in->cb.freeMemory(*FMUstate);
+    if (*FMUstate) {
+        ((Snapshot *)*FMUstate)->h.magic = 0;
+        in->cb.freeMemory(*FMUstate);
+    }
     *FMUstate = s;
     return fmi2OK;
 }
