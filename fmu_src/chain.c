@@ -108,16 +108,7 @@ static int allocate(Chain *c) {
     c->sc.delta = xcalloc(c, ns, sizeof(double), &fail);
     c->sc.ddelta = xcalloc(c, ns, sizeof(double), &fail);
     c->sc.force = xcalloc(c, ns, sizeof(double), &fail);
-    c->sc.R = xcalloc(c, (size_t)9 * N, sizeof(double), &fail);
-    c->sc.wworld = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
-    c->sc.F = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
-    c->sc.T = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
-    c->sc.s = xcalloc(c, N, sizeof(double), &fail);
-    c->sc.sdot = xcalloc(c, N, sizeof(double), &fail);
-    c->sc.frame = xcalloc(c, N, sizeof(TrackFrame), &fail);
-    c->sc.el = xcalloc(c, N, sizeof(int), &fail);
-    c->sc.v_t = xcalloc(c, N, sizeof(double), &fail);
-    c->sc.wheel_speed = xcalloc(c, (size_t)N_WHEEL * N, sizeof(double), &fail);
+    c->sc.cart = xcalloc(c, N, sizeof(CartScratch), &fail);
     for (int k = 0; k < 7; k++) c->ode.k[k] = xcalloc(c, ny, sizeof(double), &fail);
     c->ode.ytmp = xcalloc(c, ny, sizeof(double), &fail);
     c->ode.ynew = xcalloc(c, ny, sizeof(double), &fail);
@@ -131,8 +122,7 @@ void chain_free(Chain *c) {
     if (!c) return;
     LSSAlloc a = c->m.alloc;
     void *ptrs[] = {c->st.y, c->st.s_hint, c->st.v_onset, c->st.delta_prev, c->st.ddelta_prev,
-                    c->sc.delta, c->sc.ddelta, c->sc.force, c->sc.R, c->sc.wworld, c->sc.F, c->sc.T,
-                    c->sc.s, c->sc.sdot, c->sc.frame, c->sc.el, c->sc.v_t, c->sc.wheel_speed,
+                    c->sc.delta, c->sc.ddelta, c->sc.force, c->sc.cart,
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
                     c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel};
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
@@ -171,7 +161,12 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
     memset(&spec, 0, sizeof spec);
     if (chain_load_layout(p->layout_name, resource_dir, &spec, a, err, errlen)) goto fail;
     snprintf(m->layout_name, sizeof m->layout_name, "%s", spec.name);
-    if (track_build(&spec, p->drive_motor_length, 1e-3, 1e-4, &m->track, a, err, errlen)) goto fail_spec;
+    if (track_build(&spec, p->drive_motor_length, 1e-3, 1e-4, &m->track, a, err, errlen)) {
+        char why[512];
+        snprintf(why, sizeof why, "%s", err);
+        snprintf(err, errlen, "layout.name = \"%.200s\": %s", p->layout_name, why);
+        goto fail_spec;
+    }
     if (!cart_type_lookup(spec.wheel, spec.coupling, &m->type)) {
         snprintf(err, errlen, "layout \"%s\": unknown wheel/coupling type %c/%c", spec.name, spec.wheel,
                  spec.coupling);

@@ -18,6 +18,7 @@
 #include "lss_alloc.h"
 #include "lss_vars.h"
 #include "track.h"
+#include "track_local.h"
 
 #define CART_NY 13
 #define G_INT 0     /* PI integrator, m */
@@ -72,19 +73,28 @@ typedef struct ChainModel {
     double *err_rel;                  /* per state: 1 if the error is also relative to |y| */
 } ChainModel;
 
-/* Per-contact quantities of the latest right-hand-side evaluation. */
+/* Per-cart quantities of the latest right-hand-side evaluation, kept
+ * together in memory (a cart's kinematics, geometry and forces are used
+ * together). */
 typedef struct {
+    double R[9];                      /* rotation, body -> world */
+    double ww[3];                     /* angular velocity, world */
+    double F[3], T[3];                /* force and torque (world, about the CG) */
+    double t[3];                      /* track tangent at the axle, world */
+    double s;                         /* projected axle arc length */
+    double sdot;                      /* its rate, m/s */
+    double v_t;                       /* tangential speed of the axle */
+    double wheel_speed[N_WHEEL];      /* rad/s */
+    double base_key;                  /* the s_hint the base was built at */
+    TrackBase base;                   /* track frame at s_hint (NULL element: none yet) */
+    int el;                           /* element hint */
+} CartScratch;
+
+/* Quantities of the latest right-hand-side evaluation. */
+typedef struct {
+    CartScratch *cart;                /* [N] */
     double *delta, *ddelta;           /* [N_SLOT*N] indentation and its rate */
     double *force;                    /* [N_SLOT*N] contact force magnitude */
-    double *R;                        /* [9*N] rotation of each cart */
-    double *wworld;                   /* [3*N] angular velocity, world */
-    double *F, *T;                    /* [3*N] force and torque (world, about the CG) */
-    double *s;                        /* [N] projected axle arc length */
-    double *sdot;                     /* [N] its rate, m/s */
-    TrackFrame *frame;                /* [N] track frame at the axle */
-    int *el;                          /* [N] element hint of each cart */
-    double *v_t;                      /* [N] tangential speed of each axle */
-    double *wheel_speed;              /* [N_WHEEL*N] rad/s */
     double jointF[3];                 /* front-joint force on the transducer cart, its body frame */
     double v_mean, F_cmd, F_total, P_total;
     long n_rhs;

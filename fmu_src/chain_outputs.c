@@ -28,7 +28,7 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
         c->scratch_at_state = 1;
     }
     int tr = m->transducer;
-    const double *f = sc->force + N_SLOT * tr + SLOT_WHEEL, *ws = sc->wheel_speed + N_WHEEL * tr;
+    const double *f = sc->force + N_SLOT * tr + SLOT_WHEEL, *ws = sc->cart[tr].wheel_speed;
     o->transducer_joint_F_x = sc->jointF[0];
     o->transducer_joint_F_y = sc->jointF[1];
     o->transducer_joint_F_z = sc->jointF[2];
@@ -40,7 +40,7 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->transducer_wheel_w_sr = ws[W_SR];
     o->transducer_wheel_w_dl = ws[W_DL];
     o->transducer_wheel_w_dr = ws[W_DR];
-    o->transducer_s = sc->s[tr];
+    o->transducer_s = sc->cart[tr].s;
     o->chain_v_mean = sc->v_mean;
     o->drive_F_total = sc->F_total;
     o->drive_P_total = sc->P_total;

@@ -1,5 +1,6 @@
-/* The right-hand side of the chain: kinematics of every cart, then the
- * contact forces (joints, wheels), the motors, and Newton-Euler per cart.
+/* The right-hand side of the chain: kinematics of every cart with its
+ * wheels against the track, then the speed controller (it needs the mean
+ * speed of all carts), the joints, the motors, and Newton-Euler per cart.
  * Cost is linear in the number of carts. */
 #include "chain_internal.h"
 
@@ -8,19 +9,21 @@ void chain_rhs(Chain *c, double t, const double *y, double *dy) {
     ChainScratch *sc = &c->sc;
     int N = m->n_carts;
     (void)t;
-    double sum_vt = 0.0;
-    for (int i = 0; i < N; i++) sum_vt += cart_kinematics(c, y, i);
+    double sum_vt = 0.0, p_damp = 0.0, p_roll = 0.0;
+    for (int i = 0; i < N; i++) {
+        CartLocal L;
+        sum_vt += cart_kinematics(c, y, i, &L);
+        wheel_forces(c, i, &L, &p_damp, &p_roll);
+    }
     double v_mean = sum_vt / N, zdot;
     const double *gl = y + CART_NY * N;
     double F_cmd = drive_command(m, &c->st, v_mean, gl[G_INT], &zdot);
     sc->F_total = sc->P_total = 0.0;
-    double p_damp = 0.0, p_roll = 0.0;
     for (int j = 0; j < N; j++) joint_forces(c, y, j, &p_damp);
     for (int i = 0; i < N; i++) {
-        wheel_forces(c, y, i, &p_damp, &p_roll);
         drive_forces(c, y, i, F_cmd);
+        cart_derivatives(c, y, i, dy);
     }
-    for (int i = 0; i < N; i++) cart_derivatives(c, y, i, dy);
     double *dg = dy + CART_NY * N;
     dg[G_INT] = zdot;
     dg[G_WMOT] = sc->P_total;

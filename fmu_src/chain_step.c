@@ -7,7 +7,10 @@
 #include "chain_internal.h"
 
 /* A contact that closed within the step gets its onset velocity, interpolated
- * at the crossing; an open one forgets. Returns 1 if anything changed. */
+ * at the crossing; an open one forgets. Returns 1 if the right-hand side at
+ * the new point changed: only when a contact closed and the remembered
+ * onset velocity differs from the closing rate the evaluation used (an open
+ * contact has no force whatever it remembers). */
 static int update_contact_memory(Chain *c) {
     ChainState *st = &c->st;
     const ChainScratch *sc = &c->sc;
@@ -19,12 +22,12 @@ static int update_contact_memory(Chain *c) {
                 double d0 = st->delta_prev[k], dd0 = st->ddelta_prev[k];
                 double th = (d0 < 0 && d1 > d0) ? d0 / (d0 - d1) : 1.0;
                 double v = (1 - th) * dd0 + th * dd1;
-                st->v_onset[k] = v > c->m.v_min ? v : c->m.v_min;
-                changed = 1;
+                v = v > c->m.v_min ? v : c->m.v_min;
+                st->v_onset[k] = v;
+                if (v != contact_vi(0.0, dd1, c->m.v_min)) changed = 1;
             }
         } else if (st->v_onset[k] > 0) {
             st->v_onset[k] = 0.0;
-            changed = 1;
         }
         st->delta_prev[k] = d1;
         st->ddelta_prev[k] = dd1;
@@ -45,7 +48,7 @@ static int accepted(void *ctx, double t, double *y) {
             for (int j = 0; j < 4; j++) q[j] /= nq;
             changed = 1;
         }
-        c->st.s_hint[i] = c->sc.s[i];
+        c->st.s_hint[i] = c->sc.cart[i].s;
     }
     /* the scratch holds the last stage, evaluated at the new point */
     return update_contact_memory(c) || changed;

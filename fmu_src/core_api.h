@@ -48,6 +48,21 @@ void lss_chain_state(void *c, double *y);
 void lss_chain_contacts(void *c, double *delta, double *ddelta, double *force);
 void lss_chain_outputs(void *c, double *out);
 void lss_chain_stats(void *c, long *out3);
+/* Snapshot of the chain's state (as fmi2GetFMUstate): size in doubles, save
+ * into buf, load from buf (same chain and library only). */
+/* The right-hand side dy = f(t, y) of the chain's ODE at any state y
+ * (n_y entries; for Jacobians and stiffness studies). */
+void lss_chain_rhs(void *c, double t, const double *y, double *dy);
+int lss_chain_state_size(void *c);
+void lss_chain_state_save(void *c, double *buf);
+void lss_chain_state_load(void *c, const double *buf);
+/* Steps to t0 + comm, t0 + 2 comm, ... (n_comm points, t0 the chain's time)
+ * and after each writes the outputs of the n_idx value references idx (as in
+ * lss_chain_outputs: entry vr-1) to out[k * n_idx + j]: a 300 Hz master loop
+ * in C, for measuring the cost of the core without any master overhead.
+ * 0 on success, else err is filled. */
+int lss_chain_run(void *c, double comm, int n_comm, const int *idx, int n_idx, double *out, char *err,
+                  int errlen);
 
 /* --- single impact (core_api_impact.c) --- */
 /* One body of mass m (kg) approaching a Hunt-Crossley contact (law 1..6,

@@ -97,3 +97,31 @@ void lss_chain_stats(void *c, long *out3) {
     out3[1] = ch->st.ode.n_rejected;
     out3[2] = ch->st.ode.n_rhs;
 }
+
+void lss_chain_rhs(void *c, double t, const double *y, double *dy) {
+    Chain *ch = c;
+    chain_rhs(ch, t, y, dy);
+    ch->scratch_at_state = 0;
+}
+
+int lss_chain_state_size(void *c) { return (int)chain_state_size(c); }
+void lss_chain_state_save(void *c, double *buf) { chain_state_save(c, buf); }
+void lss_chain_state_load(void *c, const double *buf) { chain_state_load(c, buf); }
+
+int lss_chain_run(void *c, double comm, int n_comm, const int *idx, int n_idx, double *out, char *err,
+                  int errlen) {
+    Chain *ch = c;
+    double t0 = ch->st.ode.t;
+    for (int k = 1; k <= n_comm; k++) {
+        if (chain_step(ch, t0 + k * comm, err, (size_t)errlen) != 0) return 1;
+        LSSOutputs o;
+        chain_outputs(ch, &o);
+        for (int j = 0; j < n_idx; j++) {
+            const LSSVarInfo *v = &LSS_VARS[idx[j] + 1];
+            const char *slot = (const char *)&o + v->offset;
+            out[(size_t)(k - 1) * n_idx + j] =
+                v->in_params ? NAN : (v->type == LSS_REAL ? *(const double *)slot : (double)*(const int *)slot);
+        }
+    }
+    return 0;
+}

@@ -23,9 +23,11 @@ double drive_overlap(const ChainModel *m, double s_plate) {
     }
     double frac = 0.0;
     int few = t->n_motors <= 4;  /* then visit each motor once */
-    for (int d = few ? 0 : -2; d < (few ? t->n_motors : 2); d++) {
-        int k = few ? d : lo + d;
-        int kk = ((k % t->n_motors) + t->n_motors) % t->n_motors;
+    int nm = t->n_motors;
+    for (int d = few ? 0 : -2; d < (few ? nm : 2); d++) {
+        int kk = few ? d : lo + d;
+        if (kk < 0) kk += nm;  /* lo is in [0, nm], d in [-2, 1] */
+        else if (kk >= nm) kk -= nm;
         double ml = t->motor_s1[kk] - t->motor_s0[kk];
         if (ml <= 0) continue;
         /* the motor's centre relative to the plate centre, wrapped */
@@ -55,22 +57,21 @@ double drive_command(const ChainModel *m, const ChainState *st, double v_mean, d
 void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     const ChainModel *m = &c->m;
     ChainScratch *sc = &c->sc;
+    CartScratch *cs = &sc->cart[i];
     if (m->track.n_motors == 0 || F_cmd == 0.0) return;
-    double s_plate = sc->s[i] - (m->g.x_axle - m->g.x_motor);
+    double s_plate = cs->s - (m->g.x_axle - m->g.x_motor);
     double frac = drive_overlap(m, s_plate);
     if (frac <= 0) return;
     const double *yi = y + CART_NY * i;
-    const double *R = sc->R + 9 * i, *ww = sc->wworld + 3 * i;
-    double t[3], bm[3] = {m->g.x_motor, 0.0, m->g.z_motor}, rm[3], v[3], fv[3], tmp[3];
-    m3_col(t, sc->frame[i].R, 0);
+    const double *R = cs->R, *ww = cs->ww;
+    double bm[3] = {m->g.x_motor, 0.0, m->g.z_motor}, rm[3], v[3], fv[3], tmp[3];
     m3_mulv(rm, R, bm);
     v3_cross(v, ww, rm);
     v3_add(v, v, yi + 7);
-    v3_scale(fv, t, F_cmd * frac);
-    double *F = sc->F + 3 * i, *T = sc->T + 3 * i;
-    v3_add(F, F, fv);
+    v3_scale(fv, cs->t, F_cmd * frac);
+    v3_add(cs->F, cs->F, fv);
     v3_cross(tmp, rm, fv);
-    v3_add(T, T, tmp);
+    v3_add(cs->T, cs->T, tmp);
     sc->F_total += F_cmd * frac;
     sc->P_total += v3_dot(fv, v);
 }

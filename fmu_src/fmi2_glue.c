@@ -608,12 +608,15 @@ typedef struct {
     int version;
     int state;
     int has_chain;
+    int has_out;            /* out holds the outputs at this state */
     int tolerance_defined;
     int stop_time_defined;
     double tolerance, start_time, time, stop_time;
     size_t n;               /* doubles in the chain snapshot */
     LSSParams p;
     LSSParams built;        /* parameters the chain was built with (tolerance applied) */
+    LSSOutputs out;         /* outputs as the master saw them: re-evaluating them after a restore
+                               could differ in the last bit (projection warm starts) */
 } SnapHeader;
 
 typedef struct {
@@ -663,6 +666,7 @@ static int check_header(const SnapHeader *h, char *why, size_t len) {
         return 1;
     }
     if (!valid_state(h->state) || (h->has_chain != 0 && h->has_chain != 1) ||
+        (h->has_out != 0 && h->has_out != h->has_chain) ||
         (h->tolerance_defined != 0 && h->tolerance_defined != 1) ||
         (h->stop_time_defined != 0 && h->stop_time_defined != 1)) {
         snprintf(why, len, "corrupt FMU state: flags out of range");
@@ -702,6 +706,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     }
     int has = in->chain && !in->chain_stale;
     size_t n = has ? chain_state_size(in->chain) : 0;
+    if (has && ensure_outputs(in) != fmi2OK) return fmi2Error;  /* cannot fail: the chain exists */
     if (s && s->h.n != n) {  /* an old snapshot of another size: replace it */
         in->cb.freeMemory(s);
         s = NULL;
@@ -716,6 +721,8 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     s->h.version = SNAP_VERSION;
     s->h.state = in->state;
     s->h.has_chain = has;
+    s->h.has_out = has;
+    if (has) s->h.out = in->out;
     s->h.tolerance_defined = in->tolerance_defined;
     s->h.tolerance = in->tolerance;
     s->h.stop_time_defined = in->stop_time_defined;
@@ -771,14 +778,18 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
     in->stop_time = s->h.stop_time;
     in->start_time = s->h.start_time;
     in->time = s->h.time;
+    in->outputs_stale = 1;
     if (s->h.has_chain) {
         chain_state_load(in->chain, s->data);
         chain_set_inputs(in->chain, &in->p);
         in->chain_stale = 0;
+        if (s->h.has_out) {
+            in->out = s->h.out;
+            in->outputs_stale = 0;
+        }
     } else {
         in->chain_stale = 1;
     }
-    in->outputs_stale = 1;
     in->state = (ModelState)s->h.state;
     return fmi2OK;
 }

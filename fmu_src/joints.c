@@ -12,8 +12,9 @@ void joint_forces(Chain *c, const double *y, int j, double *p_damp) {
     const CartGeometry *g = &m->g;
     int A = j, B = (j + 1 == m->n_carts) ? 0 : j + 1;
     const double *yA = y + CART_NY * A, *yB = y + CART_NY * B;
-    const double *RA = sc->R + 9 * A, *RB = sc->R + 9 * B;
-    const double *wA = sc->wworld + 3 * A, *wB = sc->wworld + 3 * B;
+    CartScratch *cA = &sc->cart[A], *cB = &sc->cart[B];
+    const double *RA = cA->R, *RB = cB->R;
+    const double *wA = cA->ww, *wB = cB->ww;
 
     double bF[3] = {0.5 * g->pitch, 0.0, g->z_joint}, bR[3] = {-0.5 * g->pitch, 0.0, g->z_joint};
     double rF[3], rR[3], pF[3], pR[3], vF[3], vR[3], tmp[3];
@@ -63,7 +64,7 @@ void joint_forces(Chain *c, const double *y, int j, double *p_damp) {
     double f[3];
     v3_scale(f, a, sgn * fa);
     v3_axpy(f, fr, u);
-    double *FA = sc->F + 3 * A, *FB = sc->F + 3 * B, *TA = sc->T + 3 * A, *TB = sc->T + 3 * B;
+    double *FA = cA->F, *FB = cB->F, *TA = cA->T, *TB = cB->T;
     v3_add(FA, FA, f);
     v3_sub(FB, FB, f);
     v3_cross(tmp, rF, f);

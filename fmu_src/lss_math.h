@@ -38,6 +38,14 @@ static inline void m3_mul(double *R, const double *A, const double *B) {
             T[3*i+j] = A[3*i]*B[j] + A[3*i+1]*B[3+j] + A[3*i+2]*B[6+j];
     for (int k = 0; k < 9; k++) R[k] = T[k];
 }
+/* R = A^T B */
+static inline void m3_tmul(double *R, const double *A, const double *B) {
+    double T[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            T[3*i+j] = A[i]*B[j] + A[3+i]*B[3+j] + A[6+i]*B[6+j];
+    for (int k = 0; k < 9; k++) R[k] = T[k];
+}
 static inline void m3_identity(double *R) {
     for (int k = 0; k < 9; k++) R[k] = (k % 4 == 0) ? 1.0 : 0.0;
 }

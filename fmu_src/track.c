@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "lss_math.h"
+#include "track_local.h"
 
 #ifndef M_PI /* not declared under -std=c11 */
 #define M_PI 3.14159265358979323846
@@ -46,6 +47,17 @@ static void set_rate(TrackElement *e, double wx, double wy, double wz) {
     e->k = v3_norm(e->w);
     if (e->k > 0) v3_scale(e->u, e->w, 1.0 / e->k);
     else v3_set(e->u, 0, 0, 0);
+}
+
+/* The element's precomputed matrices (needs R0 and the rate). */
+static void element_precompute(TrackElement *e) {
+    const double *u = e->u;
+    double K[9] = {0, -u[2], u[1], u[2], 0, -u[0], -u[1], u[0], 0};
+    memcpy(e->K, K, sizeof K);
+    m3_mul(e->K2, K, K);
+    m3_mul(e->A, e->R0, e->K);
+    m3_mul(e->B, e->R0, e->K2);
+    e->planar = fabs(u[0]) <= 1e-12;
 }
 
 static double m3_angle_between(const double *A, const double *B) {
@@ -179,6 +191,7 @@ int track_build(const LayoutSpec *spec, double motor_length, double tol_pos, dou
             snprintf(err, errlen, "line %d: unknown element kind %d", es->line, (int)es->kind);
             return 1;
         }
+        element_precompute(e);
         element_end(e, c, R);
         s += e->length;
     }
@@ -214,9 +227,10 @@ static double wrap(const Track *t, double s) {
 }
 
 double track_ds(const Track *t, double a, double b) {
-    double d = fmod(b - a, t->length);
-    if (d > 0.5 * t->length) d -= t->length;
-    if (d <= -0.5 * t->length) d += t->length;
+    double L = t->length, d = b - a;
+    if (!(fabs(d) < L)) d = fmod(d, L);  /* fmod(d, L) = d exactly when |d| < L */
+    if (d > 0.5 * L) d -= L;
+    if (d <= -0.5 * L) d += L;
     return d;
 }
 
@@ -247,12 +261,18 @@ void track_frame(const Track *t, double s, int *hint, TrackFrame *f) {
     int i = find_element(t, s, hint ? *hint : 0);
     if (hint) *hint = i;
     const TrackElement *e = &t->el[i];
-    double Rl[9], pl[3], d[3];
-    element_local(e, s - e->s0, Rl, pl);
-    m3_mulv(d, e->R0, pl);
-    v3_add(f->c, e->c0, d);
+    double sigma = s - e->s0;
+    if (e->k == 0.0) {
+        memcpy(f->R, e->R0, sizeof f->R);
+        for (int j = 0; j < 3; j++) f->c[j] = e->c0[j] + sigma * e->R0[3 * j];
+    } else {
+        double th = e->k * sigma, S = sin(th), C1 = 1.0 - cos(th);
+        for (int j = 0; j < 9; j++) f->R[j] = e->R0[j] + S * e->A[j] + C1 * e->B[j];
+        double a = C1 / e->k, b = sigma - S / e->k;
+        for (int j = 0; j < 3; j++)
+            f->c[j] = e->c0[j] + sigma * e->R0[3 * j] + a * e->A[3 * j] + b * e->B[3 * j];
+    }
     v3_axpy(f->c, -s / t->length, t->closure);
-    m3_mul(f->R, e->R0, Rl);
     v3_copy(f->w, e->w);
     f->s = s;
     f->el = i;
@@ -279,4 +299,51 @@ double track_project(const Track *t, const double *p, double s_guess, int *hint,
     }
     track_frame(t, s, hint, f);
     return f->s;
+}
+
+/* --- local frames (track_local.h) ------------------------------------------- */
+
+void track_base(const Track *t, double s, int *hint, TrackBase *b) {
+    TrackFrame f;
+    track_frame(t, s, hint, &f);
+    memcpy(b->R, f.R, sizeof b->R);
+    v3_copy(b->c, f.c);
+    double cl[3];
+    v3_scale(cl, t->closure, 1.0 / t->length);
+    m3_tmulv(b->chat, f.R, cl);
+    b->s = f.s;
+    b->el = f.el;
+    b->e = &t->el[f.el];
+    b->lo = b->e->s0 - f.s;
+    b->hi = b->e->s0 + b->e->length - f.s;
+}
+
+void track_project_face(const Track *t, const TrackBase *b, const double *q, double ds_guess, int face,
+                        double h, int *hint, LocalFrame *lf) {
+    double p[3], s = b->s + ds_guess, dsum = 0.0;
+    m3_mulv(p, b->R, q);
+    v3_add(p, p, b->c);
+    TrackFrame f;
+    double d[3] = {0, 0, 0};
+    for (int it = 0; it < 12; it++) {
+        track_frame(t, s, hint, &f);
+        double r[3];
+        v3_sub(r, p, f.c);
+        m3_tmulv(d, f.R, r);
+        const double *w = f.w;
+        double gp = 1.0 - (d[1] * w[2] - d[2] * w[1]);
+        double step = (d[0] - tl_astar(face, h, d, w)) / (gp > 0.1 ? gp : 0.1);
+        if (fabs(step) < 1e-12) break;
+        s += step;
+        dsum += step;
+    }
+    /* frame axes in base coordinates */
+    double E[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            E[3 * i + j] = b->R[i] * f.R[j] + b->R[3 + i] * f.R[3 + j] + b->R[6 + i] * f.R[6 + j];
+    memcpy(lf->E, E, sizeof E);
+    v3_copy(lf->d, d);
+    lf->ds = ds_guess + dsum;
+    lf->w = t->el[f.el].w;
 }

@@ -22,6 +22,13 @@ typedef struct {
     double c0[3], R0[9];
     double w[3];     /* turn rate in the element frame, rad/m */
     double k, u[3];  /* |w| and its unit axis (u = 0 when k = 0) */
+    /* Precomputed at build, so that evaluating a frame costs one sin/cos and
+     * a few multiply-adds: with K = [u]x (element frame),
+     *   R(sigma) = R0 + sin(k sigma) A + (1 - cos(k sigma)) B,  A = R0 K, B = R0 K^2,
+     *   c(sigma) = c0 + sigma t0 + (1 - cos)/k A e_x + (sigma - sin/k) B e_x. */
+    double A[9], B[9];
+    double K[9], K2[9];  /* [u]x and [u]x^2: the frame moves by exp(ds [w]x) = I + sin K + (1-cos) K^2 */
+    int planar;          /* no twist (u_x = 0 to 1e-12): a straight line or a plane circular arc */
 } TrackElement;
 
 typedef struct {

@@ -8,90 +8,77 @@
  * the closest point, found per wheel: where the frame twists (w_x != 0, in a
  * helix) that point is not in the plane normal to the track through the
  * wheel, and the surface normal is not b or n. With the exact closest point
- * the force is the gradient of a potential and the chain conserves energy. */
+ * the force is the gradient of a potential and the chain conserves energy.
+ *
+ * The arc length s of the closest point solves a(s) = a*(s), a the
+ * t-component of p - c(s) and a* the twist offset: zero without twist; for
+ * the running surface a* = -z y w_x / (1 - y w_z), for a guide face at
+ * lateral position h, a* = z w_x (y - h) / (1 - h w_z + z w_y)
+ * (track_local.h, tl_astar). Everything here is in the coordinates of the
+ * cart's track base (track_local.h); the search starts at the axle's arc
+ * length and is closed-form on straights and plane arcs. */
 #include "chain_internal.h"
 
-/* Arc length of the closest point of a surface to p: the t-component a of
- * p - c(s) must equal the twist offset a*(s) (zero without twist). For the
- * running surface (h_face unused) a* = -z y w_x / (1 - y w_z); for a guide
- * face at lateral position h, a* = z w_x (y - h) / (1 - h w_z + z w_y). */
-static void closest(const Track *tr, const double *p, double s_guess, int *hint, int face, double h,
-                    TrackFrame *f, double *a, double *y, double *z) {
-    double s = s_guess;
-    for (int it = 0; it < 10; it++) {
-        track_frame(tr, s, hint, f);
-        double d[3], t[3], n[3], b[3], dt[3], wt[3];
-        v3_sub(d, p, f->c);
-        m3_col(t, f->R, 0);
-        m3_col(n, f->R, 1);
-        m3_col(b, f->R, 2);
-        *a = v3_dot(d, t);
-        *y = v3_dot(d, n);
-        *z = v3_dot(d, b);
-        const double *w = f->w;
-        double astar = face ? *z * w[0] * (*y - h) / (1.0 - h * w[2] + *z * w[1])
-                            : -*z * *y * w[0] / (1.0 - *y * w[2]);
-        v3_set(wt, 0, w[2], -w[1]);
-        m3_mulv(dt, f->R, wt);
-        double gp = 1.0 - v3_dot(d, dt);
-        double step = (*a - astar) / (gp > 0.1 ? gp : 0.1);
-        if (fabs(step) < 1e-12) return;
-        s += step;
-    }
-}
-
-void wheel_forces(Chain *c, const double *y, int i, double *p_damp, double *p_roll) {
+void wheel_forces(Chain *c, int i, const CartLocal *L, double *p_damp, double *p_roll) {
     const ChainModel *m = &c->m;
     const CartGeometry *g = &m->g;
     ChainScratch *sc = &c->sc;
+    CartScratch *cs = &sc->cart[i];
     const ChainState *st = &c->st;
-    const double *yi = y + CART_NY * i;
-    const double *R = sc->R + 9 * i, *ww = sc->wworld + 3 * i;
-    double *F = sc->F + 3 * i, *T = sc->T + 3 * i;
-    int hint = sc->el[i];
+    const TrackBase *b = &cs->base;
+    const double *M = L->M;
+    double Fl[3] = {0, 0, 0}, Tl[3] = {0, 0, 0};
+    /* the body's x and z axis parts of the wheel centres, shared by each pair */
+    double xs[3], xd[3];
+    for (int j = 0; j < 3; j++) {
+        xd[j] = M[3 * j] * g->x_axle + M[3 * j + 2] * g->z_axle;
+        xs[j] = M[3 * j] * g->x_axle + M[3 * j + 2] * g->z_steer;
+    }
 
-    static const double side[N_WHEEL] = {1.0, -1.0, 1.0, -1.0};
     for (int k = 0; k < N_WHEEL; k++) {
         int drive = (k == W_DL || k == W_DR);
-        double bc[3] = {g->x_axle, side[k] * (drive ? g->y_drive : g->y_steer), drive ? g->z_axle : g->z_steer};
-        double rc[3], p[3], v[3], tmp[3];
-        m3_mulv(rc, R, bc);
-        v3_add(p, yi, rc);
-        v3_cross(v, ww, rc);
-        v3_add(v, v, yi + 7);
-        TrackFrame f;
-        double a, yl, zl, r, N[3], t[3], n[3], b[3];
-        double h = side[k] * g->guide_half;
-        closest(&m->track, p, sc->s[i], &hint, !drive, h, &f, &a, &yl, &zl);
-        m3_col(t, f.R, 0);
-        m3_col(n, f.R, 1);
-        m3_col(b, f.R, 2);
-        const double *w = f.w;
-        double delta, ddelta, dir[3];
+        double side = (k == W_SL || k == W_DL) ? 1.0 : -1.0;
+        double yb = side * (drive ? g->y_drive : g->y_steer), r = drive ? g->r_drive : g->r_steer;
+        const double *x0 = drive ? xd : xs;
+        double rc[3], q[3], v[3];
+        for (int j = 0; j < 3; j++) rc[j] = x0[j] + M[3 * j + 1] * yb;
+        v3_add(q, L->q, rc);
+        v3_cross(v, L->om, rc);
+        v3_add(v, v, L->v);
+        double h = side * g->guide_half;
+        int face = drive ? TL_RUNNING : TL_GUIDE;
+        LocalFrame f;
+        if (!tl_project(b, q, L->axle.ds, face, h, &f))
+            track_project_face(&m->track, b, q, L->axle.ds, face, h, &cs->el, &f);
+        const double *E = f.E, *d = f.d, *w = f.w;
+        double vf[3], Nf[3], delta, ddelta, dir[3];
+        m3_tmulv(vf, E, v);
         if (drive) {
             /* normal of the running surface: (1 - y w_z) b - y w_x t */
-            r = g->r_drive;
-            v3_scale(N, b, 1.0 - yl * w[2]);
-            v3_axpy(N, -yl * w[0], t);
-            v3_scale(N, N, 1.0 / v3_norm(N));
-            double D = a * v3_dot(t, N) + zl * v3_dot(b, N);
-            delta = r - D;
-            ddelta = -v3_dot(N, v);
-            v3_copy(dir, N);
+            if (w[0] == 0.0) {
+                v3_set(Nf, 0.0, 0.0, 1.0);
+            } else {
+                v3_set(Nf, -d[1] * w[0], 0.0, 1.0 - d[1] * w[2]);
+                v3_scale(Nf, Nf, 1.0 / v3_norm(Nf));
+            }
+            delta = r - (d[0] * Nf[0] + d[2] * Nf[2]);
+            ddelta = -v3_dot(Nf, vf);
+            v3_copy(dir, Nf);
         } else {
             /* normal of the face at h: (1 - h w_z + z w_y) n + z w_x t, and
              * the wheel's clearance to it measured towards the track centre */
-            r = g->r_steer;
-            v3_scale(N, n, 1.0 - h * w[2] + zl * w[1]);
-            v3_axpy(N, zl * w[0], t);
-            v3_scale(N, N, 1.0 / v3_norm(N));
-            double D = -side[k] * (a * v3_dot(t, N) + (yl - h) * v3_dot(n, N));
-            delta = r - D;
-            ddelta = side[k] * v3_dot(N, v);
-            v3_scale(dir, N, -side[k]);
+            if (w[0] == 0.0) {
+                v3_set(Nf, 0.0, 1.0, 0.0);
+            } else {
+                v3_set(Nf, d[2] * w[0], 1.0 - h * w[2] + d[2] * w[1], 0.0);
+                v3_scale(Nf, Nf, 1.0 / v3_norm(Nf));
+            }
+            delta = r + side * (d[0] * Nf[0] + (d[1] - h) * Nf[1]);
+            ddelta = side * v3_dot(Nf, vf);
+            v3_scale(dir, Nf, -side);
         }
-        double vt = v3_dot(v, t);
-        sc->wheel_speed[N_WHEEL * i + k] = vt / r;
+        double vt = vf[0];
+        cs->wheel_speed[k] = vt / r;
         int slot = N_SLOT * i + SLOT_WHEEL + k;
         double fn = 0.0;
         if (delta > 0) {
@@ -101,18 +88,26 @@ void wheel_forces(Chain *c, const double *y, int i, double *p_damp, double *p_ro
             *p_damp += (fn - fe) * ddelta;
             double sg = smooth_sign(vt), froll = m->mu_roll * fn;
             *p_roll += froll * sg * vt;
-            double fv[3], arm[3];
-            v3_scale(fv, dir, fn);
-            v3_axpy(fv, -froll * sg, t);
+            /* force in the frame, then in base coordinates */
+            double ff[3], fv[3], db[3], arm[3], tmp[3];
+            v3_scale(ff, dir, fn);
+            ff[0] -= froll * sg;
+            m3_mulv(fv, E, ff);
+            m3_mulv(db, E, dir);
             /* applied at the contact point, a wheel radius from the centre */
             v3_copy(arm, rc);
-            v3_axpy(arm, -r, dir);
-            v3_add(F, F, fv);
+            v3_axpy(arm, -r, db);
+            v3_add(Fl, Fl, fv);
             v3_cross(tmp, arm, fv);
-            v3_add(T, T, tmp);
+            v3_add(Tl, Tl, tmp);
         }
         sc->delta[slot] = delta;
         sc->ddelta[slot] = ddelta;
         sc->force[slot] = fn;
     }
+    double tmp[3];
+    m3_mulv(tmp, b->R, Fl);
+    v3_add(cs->F, cs->F, tmp);
+    m3_mulv(tmp, b->R, Tl);
+    v3_add(cs->T, cs->T, tmp);
 }

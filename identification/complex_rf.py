@@ -84,7 +84,7 @@ def parse_bounds(bounds: Any) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"bounds: not numeric ({exc})") from None
     if lo.size == 0:
         raise ValueError("bounds: at least one design variable is needed")
-    for i, (a, b) in enumerate(zip(lo, hi)):
+    for i, (a, b) in enumerate(zip(lo.tolist(), hi.tolist())):
         if not (math.isfinite(a) and math.isfinite(b)):
             raise ValueError(f"bounds[{i}] = ({a!r}, {b!r}) is not finite; explicit finite bounds are required")
         if not a < b:
@@ -100,7 +100,7 @@ def _check_x0(x0: Any, lo: np.ndarray, hi: np.ndarray) -> np.ndarray | None:
     x = np.asarray(x0, dtype=float).ravel()
     if x.shape != lo.shape:
         raise ValueError(f"x0 has {x.size} elements but bounds have {lo.size}")
-    for i, (v, a, b) in enumerate(zip(x, lo, hi)):
+    for i, (v, a, b) in enumerate(zip(x.tolist(), lo.tolist(), hi.tolist())):
         if not math.isfinite(v):
             raise ValueError(f"x0[{i}] = {v!r} is not finite")
         if not a <= v <= b:

@@ -230,9 +230,11 @@ def test_trace_is_a_hysteresis_loop():
 # --- the FMU rejects bad contact parameters -----------------------------------------
 
 @pytest.fixture(scope="module")
-def sim():
+def sim(fmu_file):
+    """An instance of our own (in Instantiated state throughout), from the
+    session's freshly built FMU (tests/conftest.py)."""
     from lss_fmu.runner import ChainSimulator
-    with ChainSimulator() as s:
+    with ChainSimulator(fmu_file) as s:
         yield s
 
 

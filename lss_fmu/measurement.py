@@ -1,0 +1,707 @@
+"""Measurement files: one folder per measurement (docs/measurements.md).
+
+    MEAS/
+      samples.csv   comment lines '# ...' (optional), a header row with the
+                    column names, a units row, then one row per sample:
+                    time (s), the 7 forces (N), the 4 wheel speeds (rad/s)
+      meta.json     what the test engineer wrote down (layout, cart type,
+                    nominal speed and pretension, sample rate, trigger point,
+                    date, notes) and the nominal values and bounds of the
+                    layout-dependent design variables
+
+The same reader takes real logger exports and the virtual transducer cart's
+output. It checks everything and changes nothing: a file that does not fit is
+rejected with a `MeasurementError` naming the file, the line (and data row)
+and the column; no sample is dropped, reordered in time or resampled.
+
+    from lss_fmu.measurement import load_measurement
+    m = load_measurement("data/recovery/m05")
+    m.samples            # DataFrame: time + 11 channels, as in the file
+    m.forces             # the 7 force channels (DataFrame)
+    m.meta               # dict from meta.json
+    m.design             # {'v_s': DesignVariable(nominal, lower, upper, unit), ...}
+    m.layout_for_fmu     # what to give the FMU's layout.name
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Mapping, Optional, Union
+
+import numpy as np
+import pandas as pd
+
+from .layout_format import LayoutError
+from .variables import BY_NAME, FORCE_CHANNELS, SPEED_CHANNELS
+
+FORMAT_VERSION = 1
+SAMPLES_FILE = "samples.csv"
+META_FILE = "meta.json"
+TIME = "time"
+CHANNELS = FORCE_CHANNELS + SPEED_CHANNELS
+COLUMNS = [TIME] + CHANNELS
+UNITS = {TIME: "s", **{c: BY_NAME[c].unit for c in CHANNELS}}
+TIME_TOLERANCE = 0.05       # a time stamp may miss its grid point by this fraction of the interval
+RATE_TOLERANCE = 1e-3       # relative: the rate in meta.json against the time column
+
+# The layout-dependent design variables of the paper's Eq. (13), in order.
+DESIGN_VARIABLES = ("v_s", "d", "mu_d", "s_M", "K_P", "K_I")
+DESIGN_UNITS = {"v_s": "m/s", "d": "m", "mu_d": "1", "s_M": "m", "K_P": "N.s/m", "K_I": "N/m"}
+# FMU parameter (or input) each one sets; s_M is not an FMU value but the trigger
+# alignment (identification calls it "trigger.s_M")
+DESIGN_FMU = {"v_s": "drive.v_ref", "d": "chain.pretension", "mu_d": "wheel.mu_roll", "s_M": "trigger.s_M",
+              "K_P": "drive.Kp", "K_I": "drive.Ki"}
+# Defaults when meta.json does not give them: the FMU's defaults
+MU_ROLL_DEFAULT = float(BY_NAME["wheel.mu_roll"].start)
+KP_DEFAULT = float(BY_NAME["drive.Kp"].start)
+KI_DEFAULT = float(BY_NAME["drive.Ki"].start)
+
+# meta.json fields: name -> (type, unit or description); type 'number' is int or float
+REQUIRED_META = {
+    "format_version": ("int", f"format version, {FORMAT_VERSION}"),
+    "id": ("str", "measurement id"),
+    "layout": ("str", "built-in layout name or layout file (relative to the folder)"),
+    "wheel_type": ("str", "A, B or C"),
+    "coupling_type": ("str", "A or B"),
+    "speed_nominal": ("number", "m/s"),
+    "pretension_nominal": ("number", "m"),
+    "sample_rate": ("number", "Hz"),
+    "trigger_point": ("number", "m"),
+    "date": ("str", "ISO date YYYY-MM-DD or date and time"),
+}
+OPTIONAL_META = {
+    "number": ("int", "measurement number"),
+    "set": ("str", "campaign or set name"),
+    "notes": ("str", "free text"),
+    "operator": ("str", "who measured"),
+    "site": ("str", "where"),
+    "transducer_cart": ("str", "transducer cart id"),
+    "source": ("str", "logger, export or generator"),
+    "mu_roll_nominal": ("number", "rolling resistance coefficient from the wheel data sheet"),
+    "Kp_nominal": ("number", "N.s/m per motor"),
+    "Ki_nominal": ("number", "N/m per motor"),
+    "design_variables": ("dict", "nominal value and bounds of v_s, d, mu_d, s_M, K_P, K_I"),
+    "sensor": ("dict", "sensor and logger description"),
+}
+WHEEL_TYPES, COUPLING_TYPES = ("A", "B", "C"), ("A", "B")
+
+
+class MeasurementError(ValueError):
+    """A measurement that cannot be used. `path` is the file, `line` the 1-based
+    line in it (header = first non-comment line), `row` the 1-based data row,
+    `column` the column or meta.json field; any of them may be None."""
+
+    def __init__(self, message: str, path=None, column: Optional[str] = None,
+                 line: Optional[int] = None, row: Optional[int] = None):
+        self.message, self.path, self.column, self.line, self.row = message, path, column, line, row
+        where = []
+        if line is not None:
+            where.append(f"line {line}" + (f" (data row {row})" if row is not None else ""))
+        elif row is not None:
+            where.append(f"data row {row}")
+        if column is not None:
+            where.append(f"column '{column}'" if str(path or "").endswith(".csv") else f"field '{column}'")
+        head = str(path) if path is not None else ""
+        if where:
+            head = f"{head}: {', '.join(where)}" if head else ", ".join(where)
+        super().__init__(f"{head}: {message}" if head else message)
+
+
+@dataclass(frozen=True)
+class DesignVariable:
+    nominal: float
+    lower: float
+    upper: float
+    unit: str
+
+
+def derive_design_variables(meta: Mapping) -> dict:
+    """Nominal values and bounds of the layout-dependent design variables from
+    the nominal values in the metadata (the rules of docs/measurements.md):
+    v_s +-5 % of the nominal speed, d 0.5-1.5 x the nominal pretension, mu_d
+    1/3-2 x the data-sheet value, s_M +-0.5 m around the nominal trigger point,
+    K_P and K_I 1/4-4 x their nominal values."""
+    v = float(meta["speed_nominal"])
+    d = float(meta["pretension_nominal"])
+    mu = float(meta.get("mu_roll_nominal", MU_ROLL_DEFAULT))
+    s_M = float(meta["trigger_point"])
+    kp = float(meta.get("Kp_nominal", KP_DEFAULT))
+    ki = float(meta.get("Ki_nominal", KI_DEFAULT))
+    dv = {
+        "v_s": (v, 0.95 * v, 1.05 * v),
+        "d": (d, 0.5 * d, 1.5 * d),
+        "mu_d": (mu, mu / 3.0, 2.0 * mu),
+        "s_M": (s_M, s_M - 0.5, s_M + 0.5),
+        "K_P": (kp, kp / 4.0, 4.0 * kp),
+        "K_I": (ki, ki / 4.0, 4.0 * ki),
+    }
+    return {k: {"nominal": a, "lower": lo, "upper": hi, "unit": DESIGN_UNITS[k]} for k, (a, lo, hi) in dv.items()}
+
+
+# ----------------------------------------------------------------------------------------
+# the measurement object
+
+@dataclass
+class Measurement:
+    path: Path                      # the folder
+    meta: dict
+    samples: pd.DataFrame           # 'time' and the 11 channels, in the order of COLUMNS
+    design_source: str = "meta.json"
+
+    @property
+    def id(self) -> str:
+        return self.meta["id"]
+
+    @property
+    def number(self) -> Optional[int]:
+        return self.meta.get("number")
+
+    @property
+    def sample_rate(self) -> float:
+        return float(self.meta["sample_rate"])
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.samples[TIME].to_numpy()
+
+    @property
+    def forces(self) -> pd.DataFrame:
+        return self.samples[FORCE_CHANNELS]
+
+    @property
+    def speeds(self) -> pd.DataFrame:
+        return self.samples[SPEED_CHANNELS]
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.samples)
+
+    @property
+    def duration(self) -> float:
+        """Logged time span, s (n_samples / sample_rate)."""
+        return self.n_samples / self.sample_rate
+
+    @property
+    def layout(self) -> str:
+        return self.meta["layout"]
+
+    @property
+    def layout_for_fmu(self) -> str:
+        """The FMU's layout.name: the built-in name or the absolute path of the file."""
+        return _layout_for_fmu(self.meta["layout"], self.path)
+
+    @cached_property
+    def track(self):
+        from .layouts import load_track
+        return load_track(self.layout_for_fmu)
+
+    @property
+    def design(self) -> dict:
+        dv = self.meta.get("design_variables") or derive_design_variables(self.meta)
+        return {k: DesignVariable(float(dv[k]["nominal"]), float(dv[k]["lower"]), float(dv[k]["upper"]),
+                                  dv[k].get("unit", DESIGN_UNITS[k])) for k in DESIGN_VARIABLES}
+
+    def bounds(self):
+        """(names, nominal, lower, upper) of the layout-dependent design variables (Eq. 13 order)."""
+        d = self.design
+        names = list(DESIGN_VARIABLES)
+        return (names, np.array([d[k].nominal for k in names]), np.array([d[k].lower for k in names]),
+                np.array([d[k].upper for k in names]))
+
+    def fmu_bounds(self) -> dict:
+        """{FMU name: (lower, upper)} of the layout-dependent design variables
+        (names of DESIGN_FMU: drive.v_ref, chain.pretension, ..., trigger.s_M)."""
+        return {DESIGN_FMU[k]: (v.lower, v.upper) for k, v in self.design.items()}
+
+    def fmu_nominal(self) -> dict:
+        """{FMU name: nominal value} of the layout-dependent design variables."""
+        return {DESIGN_FMU[k]: v.nominal for k, v in self.design.items()}
+
+    def __repr__(self) -> str:
+        return (f"Measurement({self.id!r}, layout={self.layout!r}, {self.n_samples} samples at "
+                f"{self.sample_rate:g} Hz, {self.duration:.1f} s)")
+
+
+def _layout_for_fmu(layout: str, folder: Path) -> str:
+    from .layouts import builtin_layouts
+    if layout in builtin_layouts():
+        return layout
+    p = Path(layout).expanduser()
+    if not p.is_absolute():
+        p = Path(folder) / p
+    return str(p.resolve())
+
+
+# ----------------------------------------------------------------------------------------
+# metadata
+
+def _type_ok(value, kind: str) -> bool:
+    if kind == "int":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "number":
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "dict":
+        return isinstance(value, dict)
+    raise AssertionError(kind)
+
+
+_KIND_WORDS = {"int": "an integer", "number": "a number", "str": "a string", "dict": "an object"}
+
+
+def _json_kind(value) -> str:
+    if isinstance(value, bool):
+        return f"the boolean {json.dumps(value)}"
+    if isinstance(value, int):
+        return f"the integer {value}"
+    if isinstance(value, float):
+        return f"the number {value!r}"
+    if isinstance(value, str):
+        return f"the string {json.dumps(value[:40])}"
+    if value is None:
+        return "null"
+    if isinstance(value, list):
+        return "an array"
+    return "an object"
+
+
+def validate_meta(meta, path="meta.json", folder: Optional[Path] = None, check_layout: bool = True) -> dict:
+    """Check a metadata dict; returns it unchanged, or raises MeasurementError
+    naming the field. With check_layout the layout must resolve (relative to
+    `folder`) and agree with the wheel and coupling types and the trigger point."""
+    if not isinstance(meta, dict):
+        raise MeasurementError(f"must hold a JSON object, got {_json_kind(meta)}", path)
+    missing = [k for k in REQUIRED_META if k not in meta]
+    if missing:
+        raise MeasurementError(f"required field{'s' if len(missing) > 1 else ''} missing: "
+                               + ", ".join(missing), path)
+    for table in (REQUIRED_META, OPTIONAL_META):
+        for key, (kind, what) in table.items():
+            if key not in meta:
+                continue
+            v = meta[key]
+            if not _type_ok(v, kind):
+                raise MeasurementError(f"must be {_KIND_WORDS[kind]} ({what}), got {_json_kind(v)}", path, key)
+            if kind == "number" and not math.isfinite(v):
+                raise MeasurementError(f"must be finite, got {v!r}", path, key)
+    if meta["format_version"] != FORMAT_VERSION:
+        raise MeasurementError(f"format version {meta['format_version']} is not supported "
+                               f"(this reader knows {FORMAT_VERSION})", path, "format_version")
+    if not meta["id"].strip():
+        raise MeasurementError("must not be empty", path, "id")
+    if meta["wheel_type"] not in WHEEL_TYPES:
+        raise MeasurementError(f"must be one of {', '.join(WHEEL_TYPES)}, got {meta['wheel_type']!r}",
+                               path, "wheel_type")
+    if meta["coupling_type"] not in COUPLING_TYPES:
+        raise MeasurementError(f"must be one of {', '.join(COUPLING_TYPES)}, got {meta['coupling_type']!r}",
+                               path, "coupling_type")
+    for key in ("speed_nominal", "sample_rate"):
+        if not meta[key] > 0:
+            raise MeasurementError(f"must be positive, got {meta[key]!r}", path, key)
+    for key in ("pretension_nominal", "trigger_point", "mu_roll_nominal", "Kp_nominal", "Ki_nominal"):
+        if key in meta and meta[key] < 0:
+            raise MeasurementError(f"must not be negative, got {meta[key]!r}", path, key)
+    try:
+        _parse_date(meta["date"])
+    except ValueError:
+        raise MeasurementError(f"must be an ISO date (YYYY-MM-DD, optionally with a time), got "
+                               f"{meta['date']!r}", path, "date") from None
+    if "design_variables" in meta:
+        _validate_design(meta["design_variables"], path)
+    if check_layout:
+        _validate_layout(meta, path, folder if folder is not None else Path(path).parent)
+    return meta
+
+
+def _parse_date(text: str):
+    try:
+        return _dt.date.fromisoformat(text)
+    except ValueError:
+        return _dt.datetime.fromisoformat(text)
+
+
+def _validate_design(dv, path) -> None:
+    if not isinstance(dv, dict):
+        raise MeasurementError(f"must be an object, got {_json_kind(dv)}", path, "design_variables")
+    missing = [k for k in DESIGN_VARIABLES if k not in dv]
+    if missing:
+        raise MeasurementError(f"lacks {', '.join(missing)} (needs {', '.join(DESIGN_VARIABLES)})",
+                               path, "design_variables")
+    extra = [k for k in dv if k not in DESIGN_VARIABLES]
+    if extra:
+        raise MeasurementError(f"unknown design variable{'s' if len(extra) > 1 else ''} {', '.join(extra)} "
+                               f"(known: {', '.join(DESIGN_VARIABLES)})", path, "design_variables")
+    for k in DESIGN_VARIABLES:
+        entry = dv[k]
+        name = f"design_variables.{k}"
+        if not isinstance(entry, dict):
+            raise MeasurementError(f"must be an object with nominal, lower, upper, got {_json_kind(entry)}",
+                                   path, name)
+        for f in ("nominal", "lower", "upper"):
+            if f not in entry:
+                raise MeasurementError("missing", path, f"{name}.{f}")
+            v = entry[f]
+            if not _type_ok(v, "number"):
+                raise MeasurementError(f"must be a number ({DESIGN_UNITS[k]}), got {_json_kind(v)}",
+                                       path, f"{name}.{f}")
+            if not math.isfinite(v):
+                raise MeasurementError(f"must be finite, got {v!r}", path, f"{name}.{f}")
+        if "unit" in entry and entry["unit"] != DESIGN_UNITS[k]:
+            raise MeasurementError(f"unit must be {DESIGN_UNITS[k]!r}, got {entry['unit']!r}",
+                                   path, f"{name}.unit")
+        if not entry["lower"] <= entry["nominal"] <= entry["upper"] or not entry["lower"] < entry["upper"]:
+            raise MeasurementError(f"needs lower < upper and lower <= nominal <= upper, got lower "
+                                   f"{entry['lower']!r}, nominal {entry['nominal']!r}, upper {entry['upper']!r}",
+                                   path, name)
+
+
+_TRACK_CACHE: dict = {}
+
+
+def _validate_layout(meta, path, folder: Path) -> None:
+    from .layouts import load_spec, load_track, resolve_layout
+    layout = meta["layout"]
+    target = _layout_for_fmu(layout, folder)
+    try:
+        resolve_layout(target)
+        spec = load_spec(target)
+    except LayoutError as exc:
+        raise MeasurementError(f"unknown layout {layout!r}: {exc}", path, "layout") from None
+    if spec.wheel != meta["wheel_type"]:
+        raise MeasurementError(f"is {meta['wheel_type']!r} but layout {layout!r} has wheel type {spec.wheel!r}",
+                               path, "wheel_type")
+    if spec.coupling != meta["coupling_type"]:
+        raise MeasurementError(f"is {meta['coupling_type']!r} but layout {layout!r} has coupling type "
+                               f"{spec.coupling!r}", path, "coupling_type")
+    key = (target, os.path.getmtime(resolve_layout(target)))
+    track = _TRACK_CACHE.get(key)
+    if track is None:
+        try:
+            track = load_track(target)
+        except LayoutError as exc:
+            raise MeasurementError(f"layout {layout!r} cannot be used: {exc}", path, "layout") from None
+        _TRACK_CACHE[key] = track
+    if not meta["trigger_point"] < track.length:
+        raise MeasurementError(f"{meta['trigger_point']!r} m is not on the track (layout {layout!r} is "
+                               f"{track.length:.3f} m long)", path, "trigger_point")
+
+
+def read_meta(path: Union[str, Path], check_layout: bool = True) -> dict:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MeasurementError("file not found", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MeasurementError(f"cannot read: {exc}", path) from None
+    try:
+        meta = json.loads(text, parse_constant=_reject_constant)
+    except json.JSONDecodeError as exc:
+        raise MeasurementError(f"not valid JSON: {exc.msg} (column {exc.colno})", path, line=exc.lineno) from None
+    except ValueError as exc:
+        raise MeasurementError(str(exc), path) from None
+    return validate_meta(meta, path, path.parent, check_layout)
+
+
+def _reject_constant(name):
+    raise ValueError(f"not valid JSON: {name} is not a JSON number")
+
+
+# ----------------------------------------------------------------------------------------
+# samples
+
+def validate_samples(df: pd.DataFrame, sample_rate: float, path="samples", line_of_row=None) -> None:
+    """Columns, finiteness, strictly increasing regular time at sample_rate."""
+    cols = list(df.columns)
+    _check_columns(cols, path, header_line=None)
+    n = len(df)
+    if n < 2:
+        raise MeasurementError(f"needs at least 2 samples, has {n}", path)
+    line_of_row = line_of_row or (lambda r: None)
+    for c in COLUMNS:
+        x = df[c].to_numpy()
+        if x.dtype.kind not in "fiu":
+            raise MeasurementError(f"is not numeric (dtype {x.dtype})", path, c)
+        bad = np.nonzero(~np.isfinite(x.astype(float)))[0]
+        if len(bad):
+            r = int(bad[0])
+            raise MeasurementError(f"value {float(x[r])!r} is not finite (NaN or Inf): a gap in the logger's "
+                                   f"record must be cut or filled by hand, not here"
+                                   + (f" ({len(bad)} such values)" if len(bad) > 1 else ""),
+                                   path, c, line_of_row(r), r + 1)
+    _check_time(df[TIME].to_numpy(dtype=float), float(sample_rate), path, line_of_row)
+
+
+def _check_columns(cols, path, header_line):
+    dup = sorted({c for c in cols if cols.count(c) > 1})
+    if dup:
+        raise MeasurementError(f"column{'s' if len(dup) > 1 else ''} {', '.join(map(repr, dup))} "
+                               f"appear more than once", path, line=header_line)
+    missing = [c for c in COLUMNS if c not in cols]
+    extra = [c for c in cols if c not in COLUMNS]
+    if missing:
+        raise MeasurementError(f"missing channel{'s' if len(missing) > 1 else ''}: {', '.join(missing)}"
+                               + (f" (found instead: {', '.join(map(repr, extra))})" if extra else ""),
+                               path, missing[0], header_line)
+    if extra:
+        raise MeasurementError(f"unknown channel{'s' if len(extra) > 1 else ''} {', '.join(map(repr, extra))}"
+                               f" (the columns are {', '.join(COLUMNS)})", path, extra[0], header_line)
+
+
+def _check_time(t: np.ndarray, rate: float, path, line_of_row) -> None:
+    dt = np.diff(t)
+    bad = np.nonzero(~(dt > 0))[0]
+    if len(bad):
+        r = int(bad[0]) + 1
+        raise MeasurementError(f"time is not strictly increasing: {float(t[r])!r} s follows {float(t[r - 1])!r} s",
+                               path, TIME, line_of_row(r), r + 1)
+    h = 1.0 / rate
+    med = float(np.median(dt))
+    if abs(med - h) > RATE_TOLERANCE * h:
+        raise MeasurementError(f"wrong sample rate: meta.json says {rate:g} Hz, the time column is "
+                               f"sampled at {1.0 / med:.6g} Hz (median interval {med:.6g} s)",
+                               path, TIME)
+    k = np.arange(len(t))
+    off = np.abs(t - (t[0] + k * h))
+    bad = np.nonzero(off > TIME_TOLERANCE * h)[0]
+    if len(bad):
+        r = int(bad[0])
+        gap = t[r] - t[r - 1]
+        what = (f"a gap of {gap:.6g} s ({gap * rate:.3g} intervals) after {float(t[r - 1])!r} s: samples are "
+                f"missing" if gap > 1.5 * h else f"time {float(t[r])!r} s is {t[r] - (t[0] + r * h):+.3g} s off "
+                f"the {rate:g} Hz grid")
+        raise MeasurementError(f"irregular time: {what} (tolerance {TIME_TOLERANCE:g} of the interval)",
+                               path, TIME, line_of_row(r), r + 1)
+
+
+def read_samples(path: Union[str, Path], sample_rate: float) -> pd.DataFrame:
+    """Read and check samples.csv; the columns are returned in the order of COLUMNS."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise MeasurementError("file not found", path) from None
+    except OSError as exc:
+        raise MeasurementError(f"cannot read: {exc}", path) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise MeasurementError("not UTF-8 text", path, line=line) from None
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    i = 0
+    while i < len(lines) and lines[i].startswith("#"):
+        i += 1
+    if i >= len(lines):
+        raise MeasurementError("no header row (the column names)", path)
+    header_line = i + 1
+    cols = [c.strip() for c in lines[i].split(",")]
+    _check_columns(cols, path, header_line)
+    if i + 1 >= len(lines):
+        raise MeasurementError("no units row after the header", path, line=header_line + 1)
+    units = [u.strip() for u in lines[i + 1].split(",")]
+    if len(units) != len(cols):
+        raise MeasurementError(f"the units row has {len(units)} fields, the header {len(cols)}",
+                               path, line=header_line + 1)
+    for c, u in zip(cols, units):
+        if u != UNITS[c]:
+            raise MeasurementError(f"unit {u!r} is not {UNITS[c]!r} (values are read as they are, "
+                                   f"never converted)", path, c, header_line + 1)
+    first = i + 2
+    body = lines[first:]
+    ncol = len(cols)
+    rows = []
+    for r, ln in enumerate(body):
+        f = ln.split(",")
+        if len(f) != ncol:
+            if ln.strip() == "":
+                raise MeasurementError("empty line among the samples", path, line=first + r + 1, row=r + 1)
+            raise MeasurementError(f"{len(f)} fields, the header has {ncol}", path,
+                                   line=first + r + 1, row=r + 1)
+        rows.append(f)
+    if len(rows) < 2:
+        raise MeasurementError(f"needs at least 2 samples, has {len(rows)}", path)
+    arr = np.array(rows, dtype=object)
+    data = {}
+    for j, c in enumerate(cols):
+        col = arr[:, j]
+        try:
+            x = np.array(col, dtype=np.float64)
+        except ValueError:
+            x = None
+        joined = "".join(col)
+        if x is None or any(ch in joined for ch in " \t_") or min(map(len, col)) == 0:
+            for r, s in enumerate(col):
+                ok = s == s.strip() and s != "" and "_" not in s
+                if ok:
+                    try:
+                        float(s)
+                    except ValueError:
+                        ok = False
+                if not ok:
+                    raise MeasurementError(f"{s!r} is not a number", path, c, first + r + 1, r + 1)
+        data[c] = x
+    df = pd.DataFrame({c: data[c] for c in COLUMNS})
+    validate_samples(df, sample_rate, path, line_of_row=lambda r: first + r + 1)
+    return df
+
+
+def _format_float(v: float) -> str:
+    return repr(float(v))
+
+
+def format_samples(df: pd.DataFrame, comments: Optional[list] = None) -> str:
+    out = [f"# {c}".rstrip() for c in (comments or [])]
+    out.append(",".join(COLUMNS))
+    out.append(",".join(UNITS[c] for c in COLUMNS))
+    cols = [df[c].to_numpy(dtype=float).tolist() for c in COLUMNS]
+    out.extend(",".join(map(repr, row)) for row in zip(*cols))
+    return "\n".join(out) + "\n"
+
+
+# ----------------------------------------------------------------------------------------
+# the public entry points
+
+def load_measurement(path: Union[str, Path], check_layout: bool = True) -> Measurement:
+    """Load and check one measurement folder (or its meta.json / samples.csv)."""
+    path = Path(path)
+    if path.is_file() and path.name in (META_FILE, SAMPLES_FILE):
+        path = path.parent
+    if not path.is_dir():
+        raise MeasurementError("no such measurement folder", path)
+    meta = read_meta(path / META_FILE, check_layout)
+    samples = read_samples(path / SAMPLES_FILE, float(meta["sample_rate"]))
+    source = "meta.json" if "design_variables" in meta else "derived from the nominal values in meta.json"
+    return Measurement(path, meta, samples, source)
+
+
+def find_measurements(root: Union[str, Path]) -> list:
+    """The measurement folders under root (any depth; folders holding meta.json),
+    never looking into a folder named 'answers'; sorted by number, then path."""
+    root = Path(root)
+    if (root / META_FILE).is_file():
+        return [root]
+    found = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames[:] = sorted(d for d in dirnames if d != "answers")
+        if META_FILE in filenames:
+            found.append(Path(dirpath))
+            dirnames[:] = []
+
+    def key(p):
+        try:
+            n = json.loads((p / META_FILE).read_text()).get("number")
+        except Exception:
+            n = None
+        return (n if isinstance(n, int) and not isinstance(n, bool) else 10 ** 9, str(p))
+    return sorted(found, key=key)
+
+
+def load_measurements(root: Union[str, Path], numbers=None) -> list:
+    """All measurements under root (see find_measurements), optionally only the given numbers."""
+    out = []
+    for p in find_measurements(root):
+        m = load_measurement(p)
+        if numbers is None or m.number in set(numbers):
+            out.append(m)
+    return out
+
+
+def write_measurement(folder: Union[str, Path], samples: pd.DataFrame, meta: Mapping,
+                      overwrite: bool = False, comments: Optional[list] = None) -> Path:
+    """Write a measurement folder; checks first (same rules as the loader), so
+    what is written always loads back, exactly."""
+    folder = Path(folder)
+    meta = dict(meta)
+    validate_meta(meta, META_FILE, folder, check_layout=True)
+    samples = samples[COLUMNS] if all(c in samples.columns for c in COLUMNS) else samples
+    validate_samples(samples, float(meta["sample_rate"]), SAMPLES_FILE)
+    if folder.exists() and any(folder.iterdir()) and not overwrite:
+        raise FileExistsError(f"{folder} exists and is not empty (overwrite=True to replace)")
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = folder / (SAMPLES_FILE + ".tmp")
+    tmp.write_text(format_samples(samples, comments))
+    tmp.replace(folder / SAMPLES_FILE)
+    (folder / META_FILE).write_text(json.dumps(meta, indent=2, allow_nan=False) + "\n")
+    return folder
+
+
+# ----------------------------------------------------------------------------------------
+# a figure of one measurement
+
+def plot_measurement(m: Measurement, path: Optional[Union[str, Path]] = None, title: Optional[str] = None,
+                     formats=("png", "svg"), shade_curves: bool = True):
+    """The 7 force channels of a measurement over the logged lap (time below,
+    track position s on the top axis: s_M + v_nominal t, modulo the track
+    length), horizontal curves shaded grey and vertical curves orange, as the
+    track drawing gives them. Saves path.<format> for each format when path
+    is given; returns the figure."""
+    import matplotlib
+    if path is not None:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    from .layout_format import CURVE, SPIRAL, VCURVE
+    t = m.time
+    v = float(m.meta["speed_nominal"])
+    s_M = float(m.meta["trigger_point"])
+    spans = []
+    L = None
+    if shade_curves:
+        try:
+            tr = m.track
+            L = tr.length
+            bounds = tr.boundaries()
+            colours = {CURVE: "0.88", SPIRAL: "#cfe0f5", VCURVE: "#fbe3c8"}
+            # element intervals in time, over the logged distance (unwrapped)
+            dist = v * t[-1]
+            for lap in range(int(np.floor(s_M / L)) - 1, int(np.ceil((s_M + dist) / L)) + 1):
+                for k, kind in enumerate(tr.kind):
+                    if kind in colours:
+                        a = (bounds[k] + lap * L - s_M) / v
+                        b = (bounds[k + 1] + lap * L - s_M) / v
+                        if b > 0 and a < t[-1]:
+                            spans.append((max(a, 0.0), min(b, t[-1]), colours[kind]))
+        except Exception:  # a figure without shading rather than none
+            spans = []
+    n = len(FORCE_CHANNELS)
+    fig, axes = plt.subplots(n, 1, figsize=(11, 1.45 * n + 1.2), sharex=True)
+    for ax, c in zip(axes, FORCE_CHANNELS):
+        for a, b, col in spans:
+            ax.axvspan(a, b, color=col, lw=0, zorder=0)
+        ax.plot(t, m.samples[c].to_numpy(), lw=0.6, color="C0")
+        ax.set_ylabel(c.replace("transducer.", "").replace(".", "\n", 1) + " [N]", fontsize=8)
+        ax.tick_params(labelsize=8)
+        ax.grid(alpha=0.3, lw=0.5)
+        ax.set_xlim(t[0], t[-1])
+    axes[-1].set_xlabel("time since trigger [s]")
+    top = axes[0].secondary_xaxis("top", functions=(lambda x: s_M + v * x, lambda s: (s - s_M) / v))
+    if L:
+        top.xaxis.set_major_formatter(FuncFormatter(lambda s, _: f"{s % L:.0f}"))
+    top.set_xlabel(f"track position s [m] (s_M = {s_M:g} m, at the nominal {v:g} m/s)", fontsize=9)
+    top.tick_params(labelsize=8)
+    fig.suptitle(title or f"{m.id}: {m.meta['layout']}, {v:g} m/s, d = {m.meta['pretension_nominal'] * 1e3:g} mm, "
+                 f"{m.n_samples} samples at {m.sample_rate:g} Hz", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
+    if spans:
+        from matplotlib.patches import Patch
+        names = {"0.88": "horizontal curve", "#cfe0f5": "spiral", "#fbe3c8": "vertical curve"}
+        used = [c for c in names if any(col == c for _, _, col in spans)]
+        fig.legend(handles=[Patch(color=c, label=names[c]) for c in used], loc="upper right",
+                   fontsize=7, ncol=len(used), frameon=False)
+    if path is not None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        for fmt in formats:
+            fig.savefig(path.with_suffix(f".{fmt}"), dpi=110)
+    return fig

@@ -1,0 +1,636 @@
+"""The virtual transducer cart: the paper's 22 measurements, synthesised.
+
+Two sets (docs/measurements.md):
+
+* `recovery`: the truth is the model itself: contact law LW, the CoRs of the
+  paper's Table 3 (measurement k gets row k), the layout-dependent values
+  (v_s, d, mu_d, s_M, K_P, K_I) drawn near their nominal values from the seed,
+  everything else at the FMU's defaults. Identification with LW should find
+  these values again.
+* `field`: the same test plan and draws, but as a real sorter would give them:
+  the contact law is GZ (the exact Gonthier/Zhang-Sharf relation, not one of
+  the candidates HC, HW, LW, LN), the carts of each sorter are slightly
+  heavier or lighter than their type's nominal mass, the guide play differs
+  from nominal, and the track deviates slightly from its drawing (curve and
+  vertical-curve radii and straight lengths perturbed, the loop re-closed).
+
+Each measurement is simulated by the FMU at the sensor model's internal rate
+(1200 Hz), passed through the sensor model (lss_fmu.sensor) and written as a
+measurement folder (lss_fmu.measurement). The truth goes to DIR/answers/,
+which identification never reads.
+
+    DIR/set.json               the set: name, seed, FMU hash, generation times
+    DIR/m01/ ... DIR/m22/      measurement folders (samples.csv, meta.json)
+    DIR/answers/m01/truth.json the truth of each measurement
+    DIR/answers/tracks/*.layout  the as-built tracks of the field set
+    DIR/fmu/LSSChain-<sha>.fmu the FMU that generated the set
+
+`generate_set(...)` runs measurements in parallel (one ChainSimulator per
+worker process) with a progress bar; `lss rig` is its command line
+(lss_fmu.rig_cli).
+"""
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import hashlib
+import json
+import math
+import os
+import shutil
+import time
+import traceback
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Optional, Sequence, Union
+
+import numpy as np
+
+from . import measurement as M
+from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
+from .layouts import TABLE2, load_track
+from .sensor import CHANNELS, S_CHANNEL, SensorModel
+from .variables import BY_NAME, CONTACT_MODELS
+
+SETS = ("recovery", "field")
+DEFAULT_SEED = 20120901
+SETTLE_TIME = 4.0             # s: the trigger is armed after this (start transient)
+ARRIVAL_DELAY = (1.0, 2.0)    # s after arming: when the transducer cart reaches s_M (uniform)
+END_MARGIN = 1.0              # s simulated after the expected end of the lap
+SPEED_MARGIN = 0.03           # relative: the lap may take this much longer than L / v_s
+
+# Table 2 order: measurements 1..22 are numbered layout by layout
+MEASUREMENTS_PER_LAYOUT = [("layout1", 4), ("layout2", 4), ("layout3", 3), ("layout4", 1),
+                           ("layout5", 6), ("layout6", 1), ("layout7", 3)]
+
+# The paper's Table 3 (LW): e_JA, e_JR, e_SW, e_RW of measurement k (row k)
+TABLE3 = [
+    (0.460, 0.558, 0.351, 0.645), (0.448, 0.279, 0.674, 0.576), (0.740, 0.443, 0.439, 0.483),
+    (0.501, 0.500, 0.501, 0.500), (0.538, 0.509, 0.500, 0.741), (0.716, 0.369, 0.387, 0.575),
+    (0.795, 0.202, 0.493, 0.811), (0.582, 0.322, 0.540, 0.444), (0.590, 0.310, 0.578, 0.623),
+    (0.441, 0.237, 0.489, 0.515), (0.433, 0.202, 0.732, 0.370), (0.597, 0.409, 0.544, 0.470),
+    (0.783, 0.531, 0.513, 0.361), (0.552, 0.666, 0.563, 0.597), (0.353, 0.271, 0.321, 0.200),
+    (0.425, 0.573, 0.519, 0.474), (0.584, 0.889, 0.351, 0.219), (0.251, 0.767, 0.234, 0.564),
+    (0.504, 0.236, 0.572, 0.534), (0.675, 0.473, 0.358, 0.825), (0.714, 0.590, 0.460, 0.311),
+    (0.609, 0.737, 0.318, 0.479),
+]
+COR_NAMES = ("e_JA", "e_JR", "e_SW", "e_RW")
+
+# The test plan: nominal speed (m/s) and pretension (factor on the layout's
+# calibrated pretension) of each measurement, as a test engineer would vary them.
+TEST_PLAN = {
+    1: (1.5, 1.0), 2: (2.0, 1.0), 3: (2.5, 1.25), 4: (3.0, 0.8),
+    5: (1.5, 1.25), 6: (2.0, 0.8), 7: (2.5, 1.0), 8: (3.0, 1.25),
+    9: (2.0, 1.0), 10: (2.5, 1.25), 11: (3.0, 0.8),
+    12: (2.0, 1.0),
+    13: (1.5, 0.8), 14: (1.5, 1.25), 15: (2.0, 1.0), 16: (2.5, 0.8), 17: (2.5, 1.25), 18: (3.0, 1.0),
+    19: (2.0, 1.0),
+    20: (1.5, 1.0), 21: (2.0, 1.25), 22: (3.0, 0.8),
+}
+
+# Calibrated nominal pretension d (m) per layout: the mean axial joint force on
+# straights over one lap at 2 m/s is about 900 N (docs/measurements.md,
+# `calibrate_pretension`).
+NOMINAL_PRETENSION = {
+    "layout1": 0.035, "layout2": 0.035, "layout3": 0.090, "layout4": 0.030,
+    "layout5": 0.022, "layout6": 0.025, "layout7": 0.023, "demo": 0.015, "oval": 0.012,
+}
+
+# Spread of the truth around the nominal values
+V_REL_STD, V_REL_MAX = 0.01, 0.03          # speed: the sorter's set point vs the real speed
+D_REL_STD, D_REL_MAX = 0.08, 0.25          # pretension: as set vs as measured by hand
+MU_LOG_STD, MU_RANGE = 0.2, (0.6, 1.6)     # rolling resistance (factor on 0.015)
+SM_STD, SM_MAX = 0.10, 0.30                # trigger point: m
+K_LOG_STD, K_RANGE = 0.25, (0.5, 2.0)      # PI gains (factor on the FMU defaults)
+
+# Field set: what a real sorter adds (per layout)
+FIELD_CONTACT_LAW = "GZ"
+FIELD_MASS_STD, FIELD_MASS_MAX = 0.02, 0.05          # cart.mass_factor - 1
+FIELD_GAP_STD, FIELD_GAP_RANGE = 1.0e-4, (3e-4, 8e-4)  # track.guide_gap, m (nominal 0.5 mm)
+FIELD_CURVE_RADIUS_STD = 0.005      # relative, horizontal curves and spirals
+FIELD_VCURVE_RADIUS_STD = 0.02      # relative, vertical curves
+FIELD_STRAIGHT_STD = 0.003          # m, every straight that is not solved for closure
+# FMU parameters the field set would use if the FMU had them (issue 7 effects):
+# none are set unless present in the FMU and listed here by the lead.
+FIELD_EXTRA_FMU = {}
+
+
+def numbering() -> dict:
+    """Measurement number -> layout (Table 2 order)."""
+    out, k = {}, 1
+    for layout, n in MEASUREMENTS_PER_LAYOUT:
+        for _ in range(n):
+            out[k] = layout
+            k += 1
+    return out
+
+
+NUMBERING = numbering()
+ALL_NUMBERS = tuple(sorted(NUMBERING))
+
+
+def folder_name(number: int) -> str:
+    return f"m{number:02d}"
+
+
+def parse_numbers(text: Optional[str]) -> list:
+    """'1,2,19-22' -> [1, 2, 19, 20, 21, 22]; None or 'all' -> all 22."""
+    if text is None or text.strip().lower() in ("", "all"):
+        return list(ALL_NUMBERS)
+    out = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "-" in part:
+                a, b = (int(x) for x in part.split("-", 1))
+                if a > b:
+                    raise ValueError
+                out.extend(range(a, b + 1))
+            else:
+                out.append(int(part))
+        except ValueError:
+            raise ValueError(f"--measurements: {part!r} is not a number or a range a-b") from None
+    bad = [n for n in out if n not in NUMBERING]
+    if bad:
+        raise ValueError(f"--measurements: no measurement {', '.join(map(str, bad))} (there are 1-22)")
+    return sorted(set(out))
+
+
+def _layout_index(layout: str) -> int:
+    return [lay for lay, _ in MEASUREMENTS_PER_LAYOUT].index(layout) + 1
+
+
+def trigger_point_nominal(layout: str) -> float:
+    """The photocell's nominal position: the middle of the longest level straight, to 0.1 m."""
+    tr = load_track(layout)
+    best, s_best = -1.0, 0.0
+    for i, e in enumerate(tr.spec.elements):
+        if e.kind == STRAIGHT and abs(tr.entry_incline[i]) < 1e-9 and e.length > best:
+            best, s_best = e.length, tr.s0[i] + 0.5 * e.length
+    return round(s_best, 1)
+
+
+def _clip(x, lo, hi):
+    return float(min(max(x, lo), hi))
+
+
+@dataclass
+class Case:
+    """Everything that defines one synthetic measurement."""
+    set: str
+    number: int
+    seed: int
+    layout: str                # built-in layout (what meta.json says)
+    layout_fmu: str            # what the FMU runs (built-in name or as-built track file)
+    track_length: float
+    n_carts: int
+    speed_nominal: float
+    pretension_nominal: float
+    pretension_factor: float
+    s_M_nominal: float
+    truth: dict                # design variables: v_s, d, mu_d, s_M, K_P, K_I
+    cor: dict                  # e_JA, e_JR, e_SW, e_RW
+    contact_law: str
+    fmu_params: dict           # every FMU parameter the run sets
+    field: dict                # field-set deviations (empty for recovery)
+    transducer: int
+    arrival_time: float        # expected passage of s_M
+    stop_time: float           # simulation end
+
+    @property
+    def id(self) -> str:
+        return f"{self.set}-{folder_name(self.number)}"
+
+    @property
+    def cost(self) -> float:
+        """Cart-seconds to simulate (for scheduling and estimates)."""
+        return self.n_carts * self.stop_time
+
+
+def _as_built_track(layout: str, seed: int, out_dir: Optional[Path]) -> tuple:
+    """The field set's as-built track of a layout: the design's radii and
+    straights perturbed (seeded), the loop re-closed by the design's closing
+    straights. Returns (path or None, description)."""
+    from .layout_design import DESIGNS, Design, solve
+    design = next(d for d in DESIGNS if d.name == layout)
+    rng = np.random.default_rng([seed, 2000 + _layout_index(layout)])
+    items, changes = [], []
+    # without a lateral closing straight ('y') the plan closes only if the curves keep
+    # their proportions: then one common radius factor for all of them
+    common = None if any(it.var == "y" for it in design.items) else rng.normal(0.0, FIELD_CURVE_RADIUS_STD)
+    for it in design.items:
+        it2 = dataclasses.replace(it)
+        if it.kind in (CURVE, SPIRAL):
+            dev = rng.normal(0.0, FIELD_CURVE_RADIUS_STD) if common is None else common
+            it2.radius = float(it.radius * (1.0 + dev))
+        elif it.kind == VCURVE:
+            it2.radius = float(it.radius * (1.0 + rng.normal(0.0, FIELD_VCURVE_RADIUS_STD)))
+        elif it.kind == STRAIGHT and it.var is None:
+            it2.length = float(it.length + rng.normal(0.0, FIELD_STRAIGHT_STD))
+        items.append(it2)
+    d2 = Design(f"{layout}-as-built", design.title, design.carts, design.motors, design.wheel,
+                design.coupling, items)
+    spec = solve(d2)
+    for e in spec.elements:  # plain floats, so the file reads back exactly
+        e.length, e.radius, e.angle, e.rise = float(e.length), float(e.radius), float(e.angle), float(e.rise)
+    nominal = load_track(layout).spec.elements
+    for k, (a, b) in enumerate(zip(nominal, spec.elements)):
+        if a.kind == STRAIGHT:
+            changes.append(abs(b.length - a.length))
+        else:
+            changes.append(abs(b.radius - a.radius))
+    desc = {"max_straight_change_m": float(max(c for c, e in zip(changes, nominal) if e.kind == STRAIGHT)),
+            "max_radius_change_m": float(max((c for c, e in zip(changes, nominal) if e.kind != STRAIGHT),
+                                             default=0.0)),
+            "curve_radius_rel_std": FIELD_CURVE_RADIUS_STD, "vcurve_radius_rel_std": FIELD_VCURVE_RADIUS_STD,
+            "straight_std_m": FIELD_STRAIGHT_STD}
+    if out_dir is None:
+        return None, desc, spec
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{layout}.layout"
+    text = format_layout(spec, comment=f"As-built track of {layout} for the field set (seed {seed}): the "
+                                       f"design's radii and straights perturbed, the loop re-closed.\n"
+                                       f"Written by lss_fmu.rig; part of the answers, not of the measurements.")
+    tmp = path.with_suffix(f".{os.getpid()}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+    return path, desc, spec
+
+
+def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir: Optional[Path] = None,
+              lap_seconds: Optional[float] = None, extra_params: Optional[Mapping] = None) -> Case:
+    """The definition of measurement `number` of a set, drawn from the seed.
+
+    The draws of the layout-dependent values depend only on (seed, layout) and
+    (seed, number), not on the set or on which other measurements are made, so
+    the recovery and field sets share them and any subset gives the same
+    measurements as the full run."""
+    if set_name not in SETS:
+        raise ValueError(f"unknown set {set_name!r} (known: {', '.join(SETS)})")
+    if number not in NUMBERING:
+        raise ValueError(f"no measurement {number} (there are 1-22)")
+    layout = NUMBERING[number]
+    v_nom, d_factor = TEST_PLAN[number]
+    d_nom = round(NOMINAL_PRETENSION[layout] * d_factor, 5)
+    s_M_nom = trigger_point_nominal(layout)
+    kp_nom, ki_nom = float(BY_NAME["drive.Kp"].start), float(BY_NAME["drive.Ki"].start)
+    mu_nom = float(BY_NAME["wheel.mu_roll"].start)
+    # per layout: the trigger mark and the drive (same for every measurement on the layout)
+    rl = np.random.default_rng([seed, 1000 + _layout_index(layout)])
+    s_M = s_M_nom + _clip(rl.normal(0.0, SM_STD), -SM_MAX, SM_MAX)
+    kp = kp_nom * _clip(math.exp(rl.normal(0.0, K_LOG_STD)), *K_RANGE)
+    ki = ki_nom * _clip(math.exp(rl.normal(0.0, K_LOG_STD)), *K_RANGE)
+    # per measurement: speed, pretension, rolling resistance, arrival
+    rm = np.random.default_rng([seed, number])
+    v = v_nom * (1.0 + _clip(rm.normal(0.0, V_REL_STD), -V_REL_MAX, V_REL_MAX))
+    d = d_nom * (1.0 + _clip(rm.normal(0.0, D_REL_STD), -D_REL_MAX, D_REL_MAX))
+    mu = mu_nom * _clip(math.exp(rm.normal(0.0, MU_LOG_STD)), *MU_RANGE)
+    arrival = SETTLE_TIME + float(rm.uniform(*ARRIVAL_DELAY))
+    truth = {"v_s": v, "d": d, "mu_d": mu, "s_M": s_M, "K_P": kp, "K_I": ki}
+    cor = dict(zip(COR_NAMES, TABLE3[number - 1]))
+
+    field, layout_fmu = {}, layout
+    law = "LW"
+    params = {}
+    if set_name == "field":
+        law = FIELD_CONTACT_LAW
+        rf = np.random.default_rng([seed, 3000 + _layout_index(layout)])
+        mass = 1.0 + _clip(rf.normal(0.0, FIELD_MASS_STD), -FIELD_MASS_MAX, FIELD_MASS_MAX)
+        gap = _clip(float(BY_NAME["track.guide_gap"].start) + rf.normal(0.0, FIELD_GAP_STD), *FIELD_GAP_RANGE)
+        path, desc, _ = _as_built_track(layout, seed, None if answers_dir is None else answers_dir / "tracks")
+        if path is not None:
+            layout_fmu = str(Path(path).resolve())
+        field = {"cart.mass_factor": mass, "track.guide_gap": gap, "as_built_track": desc,
+                 "as_built_file": None if path is None else f"answers/tracks/{layout}.layout"}
+        params.update({"cart.mass_factor": mass, "track.guide_gap": gap})
+        params.update(FIELD_EXTRA_FMU)
+    track = load_track(layout_fmu if set_name == "field" and layout_fmu != layout else layout)
+    L, N = float(track.length), int(track.n_carts)
+    # the transducer cart: the one that reaches s_M about `arrival` s after the start
+    pitch = L / N
+    target = (s_M - v * arrival) % L
+    idx = int(round(target / pitch)) % N
+    arrival = ((s_M - idx * pitch) % L) / v
+    if arrival < SETTLE_TIME + 0.3:  # rounding brought it too early: the next cart behind
+        idx = (idx - 1) % N
+        arrival = ((s_M - idx * pitch) % L) / v
+    log = (L / v) * (1.0 + SPEED_MARGIN) if lap_seconds is None else float(lap_seconds)
+    stop = arrival + log + END_MARGIN
+    params.update({
+        "layout.name": layout_fmu,
+        "contact.model": CONTACT_MODELS[law],
+        **{f"contact.{k}": val for k, val in cor.items()},
+        "chain.pretension": d, "wheel.mu_roll": mu, "drive.Kp": kp, "drive.Ki": ki, "drive.v_ref": v,
+        "chain.transducer": idx,
+    })
+    if extra_params:
+        params.update(extra_params)
+    return Case(set_name, number, seed, layout, layout_fmu, L, N, v_nom, d_nom, d_factor, s_M_nom, truth, cor,
+                law, params, field, idx, arrival, stop)
+
+
+def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) -> dict:
+    """What the test engineer writes down (no truth in it)."""
+    spec = TABLE2[case.layout]
+    date = _dt.date(2011, 3, 7) + _dt.timedelta(days=7 * (_layout_index(case.layout) - 1)
+                                                + case.number % 5)
+    meta = {
+        "format_version": M.FORMAT_VERSION,
+        "id": case.id,
+        "number": case.number,
+        "set": case.set,
+        "layout": case.layout,
+        "wheel_type": spec["wheel"],
+        "coupling_type": spec["coupling"],
+        "speed_nominal": case.speed_nominal,
+        "pretension_nominal": case.pretension_nominal,
+        "sample_rate": sensor.sample_rate,
+        "trigger_point": case.s_M_nominal,
+        "date": date.isoformat(),
+        "mu_roll_nominal": float(BY_NAME["wheel.mu_roll"].start),
+        "Kp_nominal": float(BY_NAME["drive.Kp"].start),
+        "Ki_nominal": float(BY_NAME["drive.Ki"].start),
+        "transducer_cart": "virtual transducer cart (lss_fmu.rig)",
+        "source": f"lss rig --set {case.set} --seed {case.seed}",
+        "notes": (f"Synthetic measurement {case.number} of the paper's campaign: layout {case.layout[-1]}, "
+                  f"speed set point {case.speed_nominal:g} m/s, pretension {case.pretension_factor:g} x the "
+                  f"layout's nominal. Logging from the photocell at the trigger point "
+                  + ("for one lap." if full_lap else f"for {n_samples} samples (shortened run, not a full lap).")),
+        "sensor": sensor.describe(),
+    }
+    meta["design_variables"] = M.derive_design_variables(meta)
+    return meta
+
+
+def truth_for(case: Case, acq: dict, sensor: SensorModel, gen: dict, fmu_sha: str) -> dict:
+    return {
+        "WARNING": "ground truth: identification must never read this file",
+        "set": case.set, "number": case.number, "id": case.id, "seed": case.seed,
+        "layout": case.layout,
+        "contact_law": case.contact_law, "contact_model": CONTACT_MODELS[case.contact_law],
+        "contact_law_note": ("LW, the law identification is expected to recover" if case.contact_law == "LW" else
+                             "GZ: the exact Gonthier / Zhang-Sharf relation between CoR and hysteresis "
+                             "damping, none of the candidate laws HC, HW, LW, LN"),
+        "cor": case.cor,
+        "design_variables": case.truth,
+        "design_order": list(COR_NAMES) + list(M.DESIGN_VARIABLES),
+        "x": [case.cor[k] for k in COR_NAMES] + [case.truth[k] for k in M.DESIGN_VARIABLES],
+        "field_deviations": case.field,
+        "fmu_parameters": case.fmu_params,
+        "layout_fmu": case.layout_fmu if case.layout_fmu == case.layout else case.field.get("as_built_file"),
+        "transducer_index": case.transducer,
+        "settle_time": SETTLE_TIME,
+        "trigger_time_sim": acq["trigger_time"],
+        "stop_time_sim": acq["stop_time"],
+        "n_samples": acq["n_samples"],
+        "full_lap": acq["full_lap"],
+        "sensor_offsets_N": acq["offsets_N"],
+        "pulse_phase_rad": acq["pulse_phase_rad"],
+        "sensor_model": sensor.describe(),
+        "fmu_sha256": fmu_sha,
+        "generation": gen,
+    }
+
+
+def answers_dir(set_dir: Union[str, Path]) -> Path:
+    return Path(set_dir) / "answers"
+
+
+def load_truth(meas: Union[str, Path, "M.Measurement"]) -> dict:
+    """The truth of a synthetic measurement (DIR/answers/mNN/truth.json next to
+    the measurement folder DIR/mNN). For evaluating results only."""
+    p = Path(meas.path if isinstance(meas, M.Measurement) else meas)
+    f = p.parent / "answers" / p.name / "truth.json"
+    if not f.is_file():
+        raise FileNotFoundError(f"no answer file {f} for {p}")
+    return json.loads(f.read_text())
+
+
+def sha256(path: Union[str, Path]) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+# ---------------------------------------------------------------------------------------
+# running one measurement
+
+def simulate_case(case: Case, sim, sensor: SensorModel, lap_seconds: Optional[float] = None,
+                  tolerance: Optional[float] = None):
+    """Run the FMU for a case and pass the record through the sensor model.
+    Returns (samples, acquisition info, record)."""
+    outputs = CHANNELS + [S_CHANNEL, "chain.v_mean"]
+    rec = sim.simulate(case.stop_time, step=sensor.internal_step, params=case.fmu_params,
+                       outputs=outputs, tolerance=tolerance)
+    rng = np.random.default_rng([case.seed, case.number, 1])
+    n = None if lap_seconds is None else int(round(lap_seconds * sensor.sample_rate))
+    samples, acq = sensor.acquire(rec, case.truth["s_M"], case.track_length, rng, arm_time=SETTLE_TIME,
+                                  n_samples=n)
+    return samples, acq, rec
+
+
+def run_measurement(set_name: str, number: int, out: Union[str, Path], sim, seed: int = DEFAULT_SEED,
+                    lap_seconds: Optional[float] = None, sensor: Optional[SensorModel] = None,
+                    fmu_sha: str = "", overwrite: bool = False, extra_params: Optional[Mapping] = None) -> dict:
+    """Simulate one measurement and write DIR/mNN and DIR/answers/mNN/truth.json."""
+    out = Path(out)
+    sensor = sensor or SensorModel()
+    t0, c0 = time.perf_counter(), time.process_time()
+    case = make_case(set_name, number, seed, answers_dir(out), lap_seconds, extra_params)
+    samples, acq, _ = simulate_case(case, sim, sensor, lap_seconds)
+    t_sim_wall, t_sim_cpu = time.perf_counter() - t0, time.process_time() - c0
+    meta = meta_for(case, sensor, acq["n_samples"], acq["full_lap"])
+    folder = out / folder_name(number)
+    if folder.exists() and overwrite:
+        shutil.rmtree(folder)
+    M.write_measurement(folder, samples, meta, overwrite=overwrite,
+                        comments=[f"{case.id}: virtual transducer cart, layout {case.layout}, "
+                                  f"{case.speed_nominal:g} m/s, written by lss_fmu.rig"])
+    gen = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+           "simulation_wall_s": t_sim_wall, "simulation_cpu_s": t_sim_cpu,
+           "simulated_time_s": case.stop_time, "n_carts": case.n_carts,
+           "cart_seconds_per_cpu_second": case.n_carts * case.stop_time / max(t_sim_cpu, 1e-9),
+           "host": os.uname().nodename, "finished": _dt.datetime.now().isoformat(timespec="seconds")}
+    truth = truth_for(case, acq, sensor, gen, fmu_sha)
+    adir = answers_dir(out) / folder_name(number)
+    adir.mkdir(parents=True, exist_ok=True)
+    (adir / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return {"number": number, "layout": case.layout, "id": case.id, "n_samples": acq["n_samples"],
+            "full_lap": acq["full_lap"], **{k: gen[k] for k in ("wall_s", "cpu_s", "simulated_time_s",
+                                                               "cart_seconds_per_cpu_second")}}
+
+
+# ---------------------------------------------------------------------------------------
+# a whole set, in parallel
+
+_WORKER = {}
+
+
+def _init_worker(fmu: str) -> None:
+    from .runner import ChainSimulator
+    _WORKER["sim"] = ChainSimulator(Path(fmu), instance_name=f"rig{os.getpid()}")
+
+
+def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite):
+    try:
+        return run_measurement(set_name, number, out, _WORKER["sim"], seed, lap_seconds, fmu_sha=fmu_sha,
+                               overwrite=overwrite)
+    except Exception as exc:  # one failed measurement must not stop the set
+        return {"number": number, "error": f"{type(exc).__name__}: {exc}",
+                "traceback": traceback.format_exc()}
+
+
+def _existing(out: Path, number: int, set_name: str, seed: int) -> Optional[bool]:
+    """None: not there; True: there and from this set and seed; False: there but different."""
+    folder, truth = out / folder_name(number), answers_dir(out) / folder_name(number) / "truth.json"
+    if not (folder / M.META_FILE).is_file() or not truth.is_file():
+        return None
+    try:
+        t = json.loads(truth.read_text())
+        return t.get("set") == set_name and t.get("seed") == seed and t.get("full_lap", False)
+    except Exception:
+        return False
+
+
+def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequence[int]] = None,
+                 seed: int = DEFAULT_SEED, workers: Optional[int] = None, fmu: Optional[Union[str, Path]] = None,
+                 lap_seconds: Optional[float] = None, overwrite: bool = False, progress: bool = True,
+                 log=print) -> list:
+    """Generate measurements of a set into `out`, in parallel.
+
+    Existing measurements of the same set and seed are kept (so an interrupted
+    run resumes); with overwrite=True they are made again. The FMU is copied
+    into out/fmu/ first, so a rebuild during the run changes nothing. Returns
+    one result dict per measurement (with 'error' for a failed one)."""
+    from tqdm import tqdm
+
+    from .runner import fmu_path
+    if set_name not in SETS:
+        raise ValueError(f"unknown set {set_name!r} (known: {', '.join(SETS)})")
+    numbers = list(ALL_NUMBERS) if numbers is None else sorted(set(int(n) for n in numbers))
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    src = fmu_path(None if fmu is None else Path(fmu))
+    sha = sha256(src)
+    fdir = out / "fmu"
+    fdir.mkdir(exist_ok=True)
+    fmu_copy = fdir / f"LSSChain-{sha[:12]}.fmu"
+    if not fmu_copy.exists():
+        shutil.copy2(src, fmu_copy)
+    adir = answers_dir(out)
+    adir.mkdir(exist_ok=True)
+    (adir / "README.txt").write_text(
+        "Ground truth of the synthetic measurements in the parent folder.\n"
+        "Identification must never read anything in this folder; it is for evaluating results.\n")
+    todo, results = [], []
+    for n in numbers:
+        state = _existing(out, n, set_name, seed)
+        if state is True and not overwrite and lap_seconds is None:
+            results.append({"number": n, "layout": NUMBERING[n], "skipped": "already generated"})
+            continue
+        if state is False and not overwrite:
+            raise FileExistsError(f"{out / folder_name(n)} holds a different measurement (other set, seed or "
+                                  f"a shortened run); use overwrite to replace it")
+        todo.append(n)
+    # longest first: better balance over the workers
+    cases = {n: make_case(set_name, n, seed, None, lap_seconds) for n in todo}
+    todo.sort(key=lambda n: -cases[n].cost)
+    workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
+    if todo:
+        est = sum(c.cost for c in cases.values())
+        log(f"lss rig: {len(todo)} measurement(s) of set '{set_name}' (seed {seed}) into {out}, {workers} "
+            f"worker(s); {est / 1e3:.0f}k cart-seconds to simulate")
+    bar = tqdm(total=len(todo), desc=f"rig {set_name}", unit="meas", disable=not progress or not todo,
+               dynamic_ncols=True)
+    try:
+        if workers == 1:
+            _init_worker(str(fmu_copy))
+            try:
+                for n in todo:
+                    r = _work(set_name, n, str(out), seed, lap_seconds, sha, overwrite)
+                    results.append(r)
+                    _report(bar, r, log)
+                    _write_set_json(out, set_name, seed, sha, fmu_copy, results)
+            finally:
+                _WORKER.pop("sim").close()
+        else:
+            with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                                     initargs=(str(fmu_copy),)) as ex:
+                futs = [ex.submit(_work, set_name, n, str(out), seed, lap_seconds, sha, overwrite) for n in todo]
+                for f in as_completed(futs):
+                    r = f.result()
+                    results.append(r)
+                    _report(bar, r, log)
+                    _write_set_json(out, set_name, seed, sha, fmu_copy, results)
+    finally:
+        bar.close()
+    _write_set_json(out, set_name, seed, sha, fmu_copy, results)
+    return sorted(results, key=lambda r: r["number"])
+
+
+def _report(bar, r, log):
+    bar.update(1)
+    if "error" in r:
+        bar.write(f"measurement {r['number']} failed: {r['error']}")
+    else:
+        bar.set_postfix_str(f"m{r['number']:02d} {r['layout']} {r['wall_s']:.0f} s")
+
+
+def _write_set_json(out: Path, set_name, seed, sha, fmu_copy, results) -> None:
+    f = out / "set.json"
+    data = {}
+    if f.is_file():
+        try:
+            data = json.loads(f.read_text())
+        except Exception:
+            data = {}
+    if data.get("set") not in (None, set_name) or data.get("seed") not in (None, seed):
+        data = {}
+    entries = data.get("measurements", {})
+    for r in results:
+        if "error" in r or "skipped" in r:
+            continue
+        entries[folder_name(r["number"])] = {k: r[k] for k in ("number", "layout", "n_samples", "full_lap",
+                                                               "wall_s", "cpu_s", "simulated_time_s",
+                                                               "cart_seconds_per_cpu_second")}
+    data.update({"set": set_name, "seed": seed, "fmu": str(fmu_copy.relative_to(out)), "fmu_sha256": sha,
+                 "description": ("22 measurements of the paper's campaign from the virtual transducer cart "
+                                 "(docs/measurements.md); truth in answers/, never read by identification"),
+                 "measurements": dict(sorted(entries.items()))})
+    tmp = f.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    tmp.replace(f)
+
+
+# ---------------------------------------------------------------------------------------
+# calibration of the nominal pretension
+
+def calibrate_pretension(layout: str, d_values: Sequence[float], v: float = 2.0, sim=None,
+                         laps: float = 1.0) -> list:
+    """Mean axial joint force of the transducer cart on straight track, over
+    `laps` laps after the settle time, for each pretension d (noise-free FMU
+    output at 300 Hz). Used to choose NOMINAL_PRETENSION."""
+    from .runner import ChainSimulator
+    tr = load_track(layout)
+    kinds = np.array([e.kind for e in tr.spec.elements])
+    own = sim is None
+    sim = sim or ChainSimulator()
+    out = []
+    try:
+        for d in d_values:
+            T = SETTLE_TIME + laps * tr.length / v
+            c0 = time.process_time()
+            df = sim.simulate(T, params={"layout.name": layout, "chain.pretension": float(d), "drive.v_ref": v},
+                              record_from=SETTLE_TIME)
+            fx = df["transducer.joint.F_x"].to_numpy()
+            st = kinds[tr.element_at(df["transducer.s"].to_numpy())] == STRAIGHT
+            out.append({"layout": layout, "d": float(d), "preload": float(sim.get("chain.preload")),
+                        "Fx_straight_mean": float(fx[st].mean()), "Fx_p5": float(np.percentile(fx, 5)),
+                        "Fx_p95": float(np.percentile(fx, 95)), "cpu_s": time.process_time() - c0})
+    finally:
+        if own:
+            sim.close()
+    return out

@@ -1,0 +1,148 @@
+"""The virtual transducer cart: the trigger lines up runs from different
+starting positions, the test plan is reproducible from the seed, and a small
+rig run (shortened logs on layout 7) writes loadable measurement folders with
+the truth kept apart."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from lss_fmu import measurement as M
+from lss_fmu import rig, sensor as S
+from lss_fmu.layouts import load_track
+from lss_fmu.rig_cli import rig_main
+from lss_fmu.variables import FORCE_CHANNELS
+
+
+# ------------------------------------------------------------------ no FMU needed
+
+def test_numbering_and_plan():
+    assert [sum(1 for v in rig.NUMBERING.values() if v == lay) for lay, _ in rig.MEASUREMENTS_PER_LAYOUT] \
+        == [4, 4, 3, 1, 6, 1, 3]
+    assert rig.NUMBERING[1] == "layout1" and rig.NUMBERING[13] == "layout5" and rig.NUMBERING[22] == "layout7"
+    assert len(rig.TABLE3) == 22 and set(rig.TEST_PLAN) == set(range(1, 23))
+    assert all(1.5 <= v <= 3.0 for v, _ in rig.TEST_PLAN.values())
+    assert rig.parse_numbers("1,2,19-22") == [1, 2, 19, 20, 21, 22]
+    assert rig.parse_numbers(None) == list(range(1, 23))
+    for bad in ("0", "23", "3-1", "x", "1,,2"):
+        with pytest.raises(ValueError, match="--measurements"):
+            rig.parse_numbers(bad)
+
+
+def test_cases_reproducible_and_within_bounds():
+    for n in range(1, 23):
+        a = rig.make_case("recovery", n)
+        assert a == rig.make_case("recovery", n)                       # same seed, same draw
+        f = rig.make_case("field", n)
+        assert f.truth == a.truth and f.cor == a.cor                   # the sets share the draws
+        assert f.contact_law == "GZ" and a.contact_law == "LW"
+        assert a.fmu_params["contact.model"] == 3 and f.fmu_params["contact.model"] == 5
+        assert tuple(a.cor[k] for k in rig.COR_NAMES) == rig.TABLE3[n - 1]
+        assert rig.make_case("recovery", n, seed=5).truth != a.truth   # another seed, other draws
+        meta = {"speed_nominal": a.speed_nominal, "pretension_nominal": a.pretension_nominal,
+                "trigger_point": a.s_M_nominal}
+        dv = M.derive_design_variables(meta)
+        for k, val in a.truth.items():
+            assert dv[k]["lower"] < val < dv[k]["upper"], (n, k, val, dv[k])
+        # the transducer cart reaches s_M after the settle time and before the end
+        assert rig.SETTLE_TIME < a.arrival_time < rig.SETTLE_TIME + 3.0
+        assert a.stop_time > a.arrival_time + a.track_length / a.truth["v_s"]
+        assert 0 <= a.transducer < a.n_carts
+        assert "cart.mass_factor" not in a.fmu_params and "track.guide_gap" not in a.fmu_params
+        assert 0.95 <= f.fmu_params["cart.mass_factor"] <= 1.05
+
+
+def test_as_built_track_closes_and_differs_slightly(tmp_path):
+    path, desc, spec = rig._as_built_track("layout5", 11, tmp_path)
+    t, t0 = load_track(str(path)), load_track("layout5")
+    assert t.closure_error < 1e-6 and abs(t.length - t0.length) < 1e-6 and t.n_carts == t0.n_carts
+    assert 0 < desc["max_straight_change_m"] < 0.2 and 0 < desc["max_radius_change_m"] < 1.0
+
+
+def test_cli_usage_errors(tmp_path, capsys):
+    assert rig_main(["--set", "recovery", "--out", str(tmp_path), "--measurements", "30"]) == 2
+    assert "no measurement 30" in capsys.readouterr().err
+    assert rig_main(["--set", "lab", "--out", str(tmp_path)]) == 2
+    assert rig_main(["--set", "field", "--out", str(tmp_path), "--workers", "0"]) == 2
+    assert rig_main(["--set", "field"]) == 2
+
+
+# ------------------------------------------------------------------ with the FMU
+
+@pytest.fixture(scope="module")
+def sim():
+    from lss_fmu.runner import ChainSimulator
+    with ChainSimulator() as s:
+        yield s
+
+
+def test_trigger_lines_up_different_starting_positions(sim):
+    """Two runs of layout 7 whose transducer carts start at different places
+    (they reach the trigger point 2 s apart) give the same signals once both
+    are cut at the trigger (3 s into the 180 deg curve); cut at the same time
+    instead, they do not."""
+    L, v, s_M, n = 65.0, 2.0, 23.0, 900
+    pitch = L / 52
+    wins, recs = [], []
+    for arrival in (4.6, 6.6):
+        idx = int(round(((s_M - v * arrival) % L) / pitch)) % 52
+        rec = sim.simulate(arrival + n / 300 + 1.0, step=1 / 300,
+                           params={"layout.name": "layout7", "chain.transducer": idx,
+                                   "chain.pretension": 0.023, "drive.v_ref": v})
+        wins.append(S.trigger_window(rec, s_M, L, n, arm_time=rig.SETTLE_TIME))
+        recs.append(rec)
+    a, b = (w[FORCE_CHANNELS].to_numpy() for w in wins)
+    span = a.max(axis=0) - a.min(axis=0)
+    nrmsd = np.sqrt(((a - b) ** 2).mean(axis=0)) / span
+    assert wins[1].attrs["trigger_time"] - wins[0].attrs["trigger_time"] > 1.5
+    for j, c in enumerate(FORCE_CHANNELS):
+        limit = 0.25 if c == "transducer.steering.F_right" else 0.06   # its sparse impacts vary
+        assert nrmsd[j] < limit, (c, nrmsd[j])
+    # without the trigger: the same absolute times of the two runs
+    t0 = wins[0].attrs["trigger_time"]
+    same_t = [r[(r.time >= t0 - 1e-9)].iloc[:n][FORCE_CHANNELS].to_numpy() for r in recs]
+    nrmsd_t = np.sqrt(((same_t[0] - same_t[1]) ** 2).mean(axis=0)) / span
+    assert nrmsd_t[1] > 4 * nrmsd[1] and nrmsd_t[3] > 4 * nrmsd[3]   # F_y and the left steering wheel
+
+
+def test_small_recovery_run_is_loadable(tmp_path, capsys):
+    out = tmp_path / "recovery"
+    code = rig_main(["--set", "recovery", "--out", str(out), "--measurements", "20", "--workers", "1",
+                     "--lap-seconds", "1.5", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    m = M.load_measurement(out / "m20")
+    assert m.n_samples == 450 and m.sample_rate == 300 and m.meta["layout"] == "layout7"
+    assert m.meta["number"] == 20 and "shortened" in m.meta["notes"]
+    assert np.isfinite(m.samples.to_numpy()).all()
+    # forces are plausible: tension in the joint, the cart's weight on its wheels
+    assert 200 < m.forces["transducer.joint.F_x"].mean() < 2500
+    assert 100 < m.forces["transducer.driving.F_left"].mean() < 300
+    # the truth is apart, complete, and not in the measurement folder
+    assert sorted(p.name for p in (out / "m20").iterdir()) == ["meta.json", "samples.csv"]
+    truth = rig.load_truth(out / "m20")
+    assert truth["contact_law"] == "LW" and truth["cor"]["e_JA"] == rig.TABLE3[19][0]
+    assert len(truth["x"]) == 10 and truth["n_samples"] == 450
+    names, nom, lo, hi = m.bounds()
+    x = np.array([truth["design_variables"][k] for k in names])
+    assert np.all(lo < x) and np.all(x < hi)
+    assert json.loads((out / "set.json").read_text())["measurements"]["m20"]["n_samples"] == 450
+    # a partial run is not silently kept as a finished measurement
+    with pytest.raises(FileExistsError):
+        rig.generate_set("recovery", out, [20], workers=1, progress=False, log=lambda *_: None)
+
+
+def test_small_field_run(tmp_path):
+    out = tmp_path / "field"
+    res = rig.generate_set("field", out, [22], workers=1, lap_seconds=1.0, progress=False, log=lambda *_: None)
+    assert "error" not in res[0], res[0]
+    m = M.load_measurement(out / "m22")
+    assert m.meta["layout"] == "layout7" and m.n_samples == 300     # the drawing, not the as-built track
+    truth = rig.load_truth(out / "m22")
+    assert truth["contact_law"] == "GZ" and truth["contact_model"] == 5
+    assert truth["fmu_parameters"]["layout.name"].endswith("answers/tracks/layout7.layout")
+    assert load_track(str(out / truth["layout_fmu"])).closure_error < 1e-6
+    assert not math.isclose(truth["field_deviations"]["cart.mass_factor"], 1.0)
+    assert M.find_measurements(out) == [out / "m22"]
