@@ -50,6 +50,33 @@ def fmpy_run(sim, layout, t_end, tol):
     return time.process_time() - t0, df[FORCE_CHANNELS].to_numpy()[1:]
 
 
+def loop_cost(sim, layout, n=20000):
+    """CPU per communication point of the master loop alone: ChainSimulator's
+    calls (fmi2DoStep of zero length + fmi2GetReal of the 7 forces) with
+    the model's work taken out, in the runner's fast form and through
+    fmpy's wrappers."""
+    import ctypes
+    from fmpy.fmi2 import fmi2Real, fmi2ValueReference
+    sim.start({"layout.name": layout})
+    vrs = [sim.vr(o) for o in FORCE_CHANNELS]
+    c_vr = (fmi2ValueReference * len(vrs))(*vrs)
+    c_val = (fmi2Real * len(vrs))()
+    val = np.frombuffer(c_val, dtype=np.float64)
+    data = np.empty((n, len(vrs)))
+    comp = sim.fmu.component
+    out = {}
+    raw = sim.fmu._functions
+    for name, do_step, get_real in (("raw", raw["fmi2DoStep"], raw["fmi2GetReal"]),
+                                    ("fmpy", sim.fmu.fmi2DoStep, sim.fmu.fmi2GetReal)):
+        t0 = time.process_time()
+        for k in range(n):
+            do_step(comp, 0.0, 0.0, 1)
+            get_real(comp, c_vr, len(vrs), c_val)
+            data[k] = val
+        out[name] = (time.process_time() - t0) / n
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--fmu", default=None)
@@ -79,6 +106,13 @@ def main(argv=None):
         print(f"{a.layout}, {a.time:g} s at 300 Hz, tol {a.tol:g}: fmpy {min(cf):.3f} s CPU, core {min(cc):.3f} s "
               f"-> overhead {100 * res['overhead']:.1f} % ({res['us_per_comm_point']:.1f} us per communication "
               f"point); outputs agree to {same:.2g} N")
+        lc = loop_cost(sim, a.layout)
+        core_per_point = min(cc) / n
+        res.update(loop_us_raw=1e6 * lc["raw"], loop_us_fmpy=1e6 * lc["fmpy"], core_us_per_point=1e6 * core_per_point,
+                   loop_overhead=lc["raw"] / core_per_point)
+        print(f"master loop alone: {1e6 * lc['raw']:.2f} us per point as ChainSimulator runs it "
+              f"({1e6 * lc['fmpy']:.2f} us through fmpy's wrappers) against {1e6 * core_per_point:.0f} us of core work "
+              f"per point -> {100 * res['loop_overhead']:.2f} %")
         if not a.no_lap:
             sim.simulate(0.01, COMM, {"layout.name": "layout7"}, FORCE_CHANNELS, tolerance=a.tol)
             lap = float(sim.get("track.length")) / 2.0

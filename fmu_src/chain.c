@@ -53,8 +53,9 @@ int chain_check_params(const LSSParams *p, char *err, size_t errlen) {
     if (!(p->solver_tolerance >= 1e-12 && p->solver_tolerance <= 0.1))
         return bad(err, errlen, "solver.tolerance", p->solver_tolerance,
                    "must lie in [1e-12, 0.1] (below 1e-12 the solver stalls in double precision)");
-    if (!(p->solver_h_max > 0.0 && p->solver_h_max <= 1.0))
-        return bad(err, errlen, "solver.h_max", p->solver_h_max, "must lie in (0, 1] s");
+    if (!(p->solver_h_max >= 1e-6 && p->solver_h_max <= 1.0))
+        return bad(err, errlen, "solver.h_max", p->solver_h_max,
+                   "must lie in [1e-6, 1] s (a smaller step would stall the solver)");
     return 0;
 }
 
@@ -85,7 +86,7 @@ int chain_load_layout(const char *name, const char *resource_dir, LayoutSpec *sp
         snprintf(path, sizeof path, "%s/layouts/%s.layout", resource_dir, name);
     }
     if (layout_read_file(path, spec, a, msg, sizeof msg) != 0) {
-        snprintf(err, errlen, "layout.name = \"%.200s\": %s: %s", name, path, msg);
+        snprintf(err, errlen, "layout.name = \"%.200s\": %s", name, msg);  /* msg starts with the path */
         return 1;
     }
     return 0;

@@ -88,6 +88,7 @@ typedef struct {
     double base_key;                  /* the s_hint the base was built at */
     TrackBase base;                   /* track frame at s_hint (NULL element: none yet) */
     int el;                           /* element hint */
+    int motor;                        /* motor index hint (drive.c) */
 } CartScratch;
 
 /* Quantities of the latest right-hand-side evaluation. */

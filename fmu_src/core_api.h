@@ -64,6 +64,15 @@ void lss_chain_state_load(void *c, const double *buf);
 int lss_chain_run(void *c, double comm, int n_comm, const int *idx, int n_idx, double *out, char *err,
                   int errlen);
 
+/* --- local track frames (core_api_local.c) --- */
+/* The trigonometry-free projections (track_local.h) against the world-frame
+ * search at n pseudo-random points near the chain's track (all faces).
+ * out5: worst difference in arc length (m), in (a, y, z) (m), in the frame
+ * axes, the worst residual |a - a*| (m) of the local result, and the share of
+ * points the local search declined (left to the world search). Returns the
+ * number of points compared. */
+int lss_chain_check_local(void *chain, int n, unsigned seed, double *out5);
+
 /* --- single impact (core_api_impact.c) --- */
 /* One body of mass m (kg) approaching a Hunt-Crossley contact (law 1..6,
  * restitution e, stiffness K in N/m^n, exponent n) at v_i (m/s), with the

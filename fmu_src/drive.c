@@ -10,10 +10,35 @@ static double overlap(double a0, double a1, double b0, double b1) {
     return hi > lo ? hi - lo : 0.0;
 }
 
+/* Sum over the motors that overlap the plate centred at s_plate of
+ * overlap / motor length. lo is the first motor starting after s_plate
+ * (0..n); motor k < 0 or k >= n stands for motor k mod n a lap earlier or
+ * later, so the loop closes without wrapping arc lengths. The motors are
+ * sorted by their start; a motor is at most motor_length long. */
+static double overlap_from(const ChainModel *m, double s_plate, int lo) {
+    const Track *t = &m->track;
+    double half = 0.5 * m->g.plate_length, L = t->length, frac = 0.0;
+    int nm = t->n_motors;
+    /* forwards: motors starting before the plate's end */
+    for (int k = lo; k < lo + nm; k++) {
+        int kk = k >= nm ? k - nm : k;
+        double shift = k >= nm ? L : 0.0, s0 = t->motor_s0[kk] + shift, s1 = t->motor_s1[kk] + shift;
+        if (s0 >= s_plate + half) break;
+        if (s1 > s0) frac += overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+    }
+    /* backwards: motors ending after the plate's start */
+    for (int k = lo - 1; k >= lo - nm; k--) {
+        int kk = k < 0 ? k + nm : k;
+        double shift = k < 0 ? -L : 0.0, s0 = t->motor_s0[kk] + shift, s1 = t->motor_s1[kk] + shift;
+        if (s0 + m->motor_length <= s_plate - half) break;
+        if (s1 > s0) frac += overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+    }
+    return frac;
+}
+
 double drive_overlap(const ChainModel *m, double s_plate) {
     const Track *t = &m->track;
     if (t->n_motors == 0) return 0.0;
-    double half = 0.5 * m->g.plate_length;
     /* first motor starting after the plate centre, by bisection */
     int lo = 0, hi = t->n_motors;
     while (lo < hi) {
@@ -21,21 +46,19 @@ double drive_overlap(const ChainModel *m, double s_plate) {
         if (t->motor_s0[mid] <= s_plate) lo = mid + 1;
         else hi = mid;
     }
-    double frac = 0.0;
-    int few = t->n_motors <= 4;  /* then visit each motor once */
-    int nm = t->n_motors;
-    for (int d = few ? 0 : -2; d < (few ? nm : 2); d++) {
-        int kk = few ? d : lo + d;
-        if (kk < 0) kk += nm;  /* lo is in [0, nm], d in [-2, 1] */
-        else if (kk >= nm) kk -= nm;
-        double ml = t->motor_s1[kk] - t->motor_s0[kk];
-        if (ml <= 0) continue;
-        /* the motor's centre relative to the plate centre, wrapped */
-        double rel = track_ds(t, s_plate, 0.5 * (t->motor_s0[kk] + t->motor_s1[kk]));
-        if (fabs(rel) > half + ml) continue;
-        frac += overlap(-half, half, rel - 0.5 * ml, rel + 0.5 * ml) / ml;
-    }
-    return frac;
+    return overlap_from(m, s_plate, lo);
+}
+
+/* The same with the index found by walking from a hint (a cart moves little
+ * between evaluations), which is updated. */
+static double drive_overlap_hint(const ChainModel *m, double s_plate, int *hint) {
+    const Track *t = &m->track;
+    int nm = t->n_motors, lo = *hint;
+    if (lo < 0 || lo > nm) lo = 0;
+    while (lo > 0 && t->motor_s0[lo - 1] > s_plate) lo--;
+    while (lo < nm && t->motor_s0[lo] <= s_plate) lo++;
+    *hint = lo;
+    return overlap_from(m, s_plate, lo);
 }
 
 double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot) {
@@ -60,7 +83,7 @@ void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     CartScratch *cs = &sc->cart[i];
     if (m->track.n_motors == 0 || F_cmd == 0.0) return;
     double s_plate = cs->s - (m->g.x_axle - m->g.x_motor);
-    double frac = drive_overlap(m, s_plate);
+    double frac = drive_overlap_hint(m, s_plate, &cs->motor);
     if (frac <= 0) return;
     const double *yi = y + CART_NY * i;
     const double *R = cs->R, *ww = cs->ww;

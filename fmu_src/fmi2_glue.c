@@ -102,12 +102,19 @@ static int hexval(char ch) {
     return -1;
 }
 
-/* file:///a%20b/ -> /a b (also file:/a, file://localhost/a); 0 on success */
+/* file:///a%20b/ -> /a b (also file:/a, file://localhost/a; file://host/a
+ * only on Windows, as a UNC path); 0 on success */
 static int decode_file_uri(const char *uri, char *out, size_t outlen) {
     const char *p = uri;
     if (strncmp(p, "file://localhost/", 17) == 0) p += 16;
     else if (strncmp(p, "file:///", 8) == 0) p += 7;
-    else if (strncmp(p, "file:/", 6) == 0) p += 5;
+    else if (strncmp(p, "file://", 7) == 0) {
+#ifdef _WIN32
+        p += 5;  /* //host/share: a UNC path */
+#else
+        return 1;  /* a remote host */
+#endif
+    } else if (strncmp(p, "file:/", 6) == 0) p += 5;
     else return 1;
 #ifdef _WIN32
     if (p[0] == '/' && p[2] == ':') p++;
@@ -119,6 +126,7 @@ static int decode_file_uri(const char *uri, char *out, size_t outlen) {
             int h = hexval(p[0]), l = h < 0 ? -1 : hexval(p[1]);
             if (h < 0 || l < 0) return 1;
             ch = (char)(h * 16 + l);
+            if (ch == '\0') return 1;  /* %00 would cut the path short */
             p += 2;
         }
         if (n + 1 >= outlen) return 1;

@@ -58,6 +58,9 @@ static void element_precompute(TrackElement *e) {
     m3_mul(e->A, e->R0, e->K);
     m3_mul(e->B, e->R0, e->K2);
     e->planar = fabs(u[0]) <= 1e-12;
+    e->ik = e->k > 0 ? 1.0 / e->k : 0.0;
+    e->uy = u[1];
+    e->uz = u[2];
 }
 
 static double m3_angle_between(const double *A, const double *B) {
@@ -316,6 +319,8 @@ void track_base(const Track *t, double s, int *hint, TrackBase *b) {
     b->e = &t->el[f.el];
     b->lo = b->e->s0 - f.s;
     b->hi = b->e->s0 + b->e->length - f.s;
+    b->ich0 = 1.0 / (1.0 - b->chat[0]);
+    b->kind = b->e->k == 0.0 ? TL_STRAIGHT : (b->e->planar ? TL_PLANAR : TL_TWISTED);
 }
 
 void track_project_face(const Track *t, const TrackBase *b, const double *q, double ds_guess, int face,

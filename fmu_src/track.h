@@ -29,6 +29,8 @@ typedef struct {
     double A[9], B[9];
     double K[9], K2[9];  /* [u]x and [u]x^2: the frame moves by exp(ds [w]x) = I + sin K + (1-cos) K^2 */
     int planar;          /* no twist (u_x = 0 to 1e-12): a straight line or a plane circular arc */
+    double ik;           /* 1 / k (0 on a straight) */
+    double uy, uz;       /* planar: the axis u = (0, uy, uz); m = K e_x = (0, uz, -uy) points to the centre */
 } TrackElement;
 
 typedef struct {

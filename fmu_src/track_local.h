@@ -29,6 +29,7 @@
 #include "track.h"
 
 enum { TL_RUNNING = 0, TL_GUIDE = 1, TL_NORMAL = 2 };
+enum { TL_STRAIGHT = 0, TL_PLANAR = 1, TL_TWISTED = 2 };
 
 typedef struct {
     double R[9];               /* frame at the base, world (columns t n b) */
@@ -36,8 +37,10 @@ typedef struct {
     double chat[3];            /* closure blend per metre of ds, base coordinates: R^T closure / L */
     double s;                  /* base arc length, wrapped */
     double lo, hi;             /* the base's element covers ds in [lo, hi) */
+    double ich0;               /* 1 / (1 - chat_x) */
     const TrackElement *e;
     int el;
+    int kind;                  /* TL_STRAIGHT, TL_PLANAR or TL_TWISTED: the base element's */
 } TrackBase;
 
 typedef struct {
@@ -114,68 +117,105 @@ static inline double tl_astar(int face, double h, const double *d, const double 
     return -d[2] * d[1] * w[0] / (1.0 - d[1] * w[2]);
 }
 
-/* Projection of q (base coordinates) within the base's element, starting
- * from ds_guess. Returns 1 and fills lf, or 0 if the point found lies
- * outside the element (or the search did not settle there). */
-static inline int tl_project(const TrackBase *b, const double *q, double ds_guess, int face, double h,
-                             LocalFrame *lf) {
+#if defined(__GNUC__)
+#define TL_INLINE inline __attribute__((always_inline))
+#else
+#define TL_INLINE inline
+#endif
+
+/* Straight: a = q_x - ds (1 - chat_x) = 0; the frame is the base's (E = I). */
+static TL_INLINE int tl_project_straight(const TrackBase *b, const double *q, LocalFrame *lf) {
+    const double *ch = b->chat;
+    double ds = q[0] * b->ich0;
+    if (!(ds >= b->lo && ds < b->hi)) return 0;
+    lf->E[0] = 1.0; lf->E[1] = 0.0; lf->E[2] = 0.0;
+    lf->E[3] = 0.0; lf->E[4] = 1.0; lf->E[5] = 0.0;
+    lf->E[6] = 0.0; lf->E[7] = 0.0; lf->E[8] = 1.0;
+    lf->d[0] = 0.0;
+    lf->d[1] = q[1] + ds * ch[1];
+    lf->d[2] = q[2] + ds * ch[2];
+    lf->ds = ds;
+    lf->w = b->e->w;
+    return 1;
+}
+
+/* Plane arc: a circle of radius 1/k about m/k, m = K e_x = (0, uz, -uy):
+ * the normal plane at angle phi = k ds contains the axis, tan(phi) = x / rho
+ * with x = q'.e_x, rho = 1/k - q'.m, where q' = q + ds chat carries the
+ * closure blend at ds. That makes ds a fixed point of slope about |chat|
+ * (~1e-6): one round from the guess gives ds to |chat| times the guess's
+ * error (the wheels start from the axle's ds, a few cm off), and (x, rho)
+ * at that ds give the frame; its error is |chat| smaller again (< 1e-13 m).
+ * A short series suffices for that ds (truncation < 1e-12 rad); with
+ * exact_ds (the axle, whose ds is its arc length) the full series gives ds
+ * from the final (x, rho). E = rotation by phi about u, written out. */
+static TL_INLINE int tl_project_planar(const TrackBase *b, const double *q, double ds_guess, int exact_ds,
+                                       LocalFrame *lf) {
     const TrackElement *e = b->e;
     const double *ch = b->chat;
-    if (e->k == 0.0) {  /* straight: a = q_x - ds (1 - chat_x) = 0 */
-        double ds = q[0] / (1.0 - ch[0]);
-        if (!(ds >= b->lo && ds < b->hi)) return 0;
-        m3_identity(lf->E);
-        lf->d[0] = 0.0;
-        lf->d[1] = q[1] + ds * ch[1];
-        lf->d[2] = q[2] + ds * ch[2];
-        lf->ds = ds;
-        lf->w = e->w;
-        return 1;
-    }
-    if (e->planar) {
-        /* A circle of radius 1/k about m/k, m = K e_x: the normal plane at
-         * angle phi = k ds contains the axis, tan(phi) = x / rho with
-         * x = q'.e_x, rho = 1/k - q'.m, where q' = q + ds chat carries the
-         * closure blend at ds. That makes ds a fixed point of slope about
-         * |chat| (~1e-6): one round from the guess gives ds to |chat| times
-         * the guess's error (the wheels start from the axle's ds, a few cm
-         * off), and (x, rho) at that ds give the frame; its error is |chat|
-         * smaller again (< 1e-13 m). A short series suffices for that ds
-         * (truncation < 1e-12 rad); the axle's own ds, which is its arc
-         * length, gets the full series from the final (x, rho). */
-        double m1 = e->K[3], m2 = e->K[6], ik = 1.0 / e->k;
-        double qm = q[1] * m1 + q[2] * m2, cm = ch[1] * m1 + ch[2] * m2;
-        double ds = ds_guess;
-        double x = q[0] + ds * ch[0], rho = ik - qm - ds * cm;
-        if (!(rho > 0.0)) return 0;
-        double z = x / rho, z2 = z * z;
-        ds = (z2 < 1e-2 ? z * (1.0 - z2 * (1.0 / 3 - z2 * (1.0 / 5 - z2 * (1.0 / 7 - z2 * (1.0 / 9)))))
-                        : atan2(x, rho)) * ik;
-        x = q[0] + ds * ch[0];
-        rho = ik - qm - ds * cm;
-        double rr = 1.0 / sqrt(x * x + rho * rho), S = x * rr, C = rho * rr, C1 = S * S / (1.0 + C);
-        tl_E(e, S, C1, lf->E);
-        /* q' - pl, pl = (S e_x + C1 m) / k */
-        double r[3] = {x - S * ik, q[1] + ds * ch[1] - C1 * ik * m1, q[2] + ds * ch[2] - C1 * ik * m2};
-        m3_tmulv(lf->d, lf->E, r);
-        if (face == TL_NORMAL) ds = tl_atan_ratio(x, rho) * ik;
-        if (!(ds >= b->lo && ds < b->hi)) return 0;
-        lf->ds = ds;
-        lf->w = e->w;
-        return 1;
-    }
-    /* twisted element: Newton as in the world-frame search */
+    double uy = e->uy, uz = e->uz, ik = e->ik;
+    double qm = q[1] * uz - q[2] * uy, cm = ch[1] * uz - ch[2] * uy;
+    double ds = ds_guess;
+    double x = q[0] + ds * ch[0], rho = ik - qm - ds * cm;
+    if (!(rho > 0.0)) return 0;
+    double z = x / rho, z2 = z * z;
+    ds = (z2 < 1e-2 ? z * (1.0 - z2 * (1.0 / 3 - z2 * (1.0 / 5 - z2 * (1.0 / 7 - z2 * (1.0 / 9)))))
+                    : atan2(x, rho)) * ik;
+    x = q[0] + ds * ch[0];
+    rho = ik - qm - ds * cm;
+    double rr = 1.0 / sqrt(x * x + rho * rho), S = x * rr, C = rho * rr, C1 = S * S / (1.0 + C);
+    double Suy = S * uy, Suz = S * uz, C1uy = C1 * uy, C1uz = C1 * uz, C1yz = C1uy * uz;
+    double *E = lf->E;
+    E[0] = C;    E[1] = -Suz;            E[2] = Suy;
+    E[3] = Suz;  E[4] = 1.0 - C1uz * uz; E[5] = C1yz;
+    E[6] = -Suy; E[7] = C1yz;            E[8] = 1.0 - C1uy * uy;
+    /* q' - pl, pl = (S e_x + C1 m) / k */
+    double r0 = x - S * ik, r1 = q[1] + ds * ch[1] - C1uz * ik, r2 = q[2] + ds * ch[2] + C1uy * ik;
+    lf->d[0] = E[0] * r0 + E[3] * r1 + E[6] * r2;
+    lf->d[1] = E[1] * r0 + E[4] * r1 + E[7] * r2;
+    lf->d[2] = E[2] * r0 + E[5] * r1 + E[8] * r2;
+    if (exact_ds) ds = tl_atan_ratio(x, rho) * ik;
+    if (!(ds >= b->lo && ds < b->hi)) return 0;
+    lf->ds = ds;
+    lf->w = e->w;
+    return 1;
+}
+
+/* Twisted element: Newton as in the world-frame search. */
+static inline int tl_project_twisted(const TrackBase *b, const double *q, double ds_guess, int face, double h,
+                                     LocalFrame *lf) {
     double ds = ds_guess;
     for (int it = 0; it < 12; it++) {
         if (!(ds >= b->lo - 0.5 && ds < b->hi + 0.5)) return 0;
         tl_eval(b, q, ds, lf);
-        const double *d = lf->d, *w = e->w;
+        const double *d = lf->d, *w = b->e->w;
         double gp = 1.0 - (d[1] * w[2] - d[2] * w[1]);
         double step = (d[0] - tl_astar(face, h, d, w)) / (gp > 0.1 ? gp : 0.1);
         if (fabs(step) < 1e-12) return ds >= b->lo && ds < b->hi;
         ds += step;
     }
     return 0;
+}
+
+/* Projection of q (base coordinates) within the base's element, starting
+ * from ds_guess; kind is b->kind (a constant where the caller specialises).
+ * Returns 1 and fills lf, or 0 if the point found lies outside the element
+ * (or the search did not settle there): the caller then uses
+ * track_project_face. */
+static TL_INLINE int tl_project_kind(const TrackBase *b, const double *q, double ds_guess, int face, double h,
+                                     LocalFrame *lf, const int kind) {
+    if (kind == TL_STRAIGHT) return tl_project_straight(b, q, lf);
+    if (kind == TL_PLANAR) return tl_project_planar(b, q, ds_guess, face == TL_NORMAL, lf);
+    return tl_project_twisted(b, q, ds_guess, face, h, lf);
+}
+
+static inline int tl_project(const TrackBase *b, const double *q, double ds_guess, int face, double h,
+                             LocalFrame *lf) {
+    switch (b->kind) {
+    case TL_STRAIGHT: return tl_project_kind(b, q, ds_guess, face, h, lf, TL_STRAIGHT);
+    case TL_PLANAR: return tl_project_kind(b, q, ds_guess, face, h, lf, TL_PLANAR);
+    default: return tl_project_kind(b, q, ds_guess, face, h, lf, TL_TWISTED);
+    }
 }
 
 #endif

@@ -14,100 +14,158 @@
  * t-component of p - c(s) and a* the twist offset: zero without twist; for
  * the running surface a* = -z y w_x / (1 - y w_z), for a guide face at
  * lateral position h, a* = z w_x (y - h) / (1 - h w_z + z w_y)
- * (track_local.h, tl_astar). Everything here is in the coordinates of the
- * cart's track base (track_local.h); the search starts at the axle's arc
- * length and is closed-form on straights and plane arcs. */
+ * (track_local.h, tl_astar).
+ *
+ * Everything here is in the coordinates of the cart's track base (the track
+ * frame at its axle after the last accepted step, track_local.h): the
+ * search starts at the axle's arc length and is closed-form on straights
+ * (where the frame is the base's: no rotation at all) and plane arcs. The
+ * code is specialised per kind of base element (straight, plane arc,
+ * twisted) and per wheel, so that each case carries only its own work. */
 #include "chain_internal.h"
 
-void wheel_forces(Chain *c, int i, const CartLocal *L, double *p_damp, double *p_roll) {
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+
+typedef struct {
+    double F[3], T[3];                /* force and torque about the CG, base coordinates */
+    double p_damp, p_roll;
+} WheelSum;
+
+/* Wheel k of cart i; x0 is the wheel centre's part along the body x and z
+ * axes (base coordinates), shared by the wheel pair. */
+static ALWAYS_INLINE void one_wheel(Chain *c, int i, const CartLocal *L, const TrackBase *b, const double *x0,
+                                    const int k, const int kind, WheelSum *acc) {
     const ChainModel *m = &c->m;
     const CartGeometry *g = &m->g;
     ChainScratch *sc = &c->sc;
     CartScratch *cs = &sc->cart[i];
-    const ChainState *st = &c->st;
+    const int drive = (k == W_DL || k == W_DR);
+    const double side = (k == W_SL || k == W_DL) ? 1.0 : -1.0;
+    const double *M = L->M;
+    double yb = side * (drive ? g->y_drive : g->y_steer), r = drive ? g->r_drive : g->r_steer;
+    double h = side * g->guide_half;
+    double rc[3], q[3], v[3];
+    for (int j = 0; j < 3; j++) rc[j] = x0[j] + M[3 * j + 1] * yb;
+    v3_add(q, L->q, rc);
+    v3_cross(v, L->om, rc);
+    v3_add(v, v, L->v);
+
+    /* the closest point: frame E (axes in base coordinates), d = (a, y, z) */
+    LocalFrame f;
+    int ident = 0, ok;
+    if (kind == TL_STRAIGHT) {
+        const double *ch = b->chat;
+        double ds = q[0] * b->ich0;
+        ok = ds >= b->lo && ds < b->hi;
+        if (ok) {
+            ident = 1;
+            v3_set(f.d, 0.0, q[1] + ds * ch[1], q[2] + ds * ch[2]);
+            f.w = b->e->w;
+        }
+    } else {
+        ok = tl_project_kind(b, q, L->axle.ds, drive ? TL_RUNNING : TL_GUIDE, h, &f, kind);
+    }
+    if (!ok) track_project_face(&m->track, b, q, L->axle.ds, drive ? TL_RUNNING : TL_GUIDE, h, &cs->el, &f);
+    const double *d = f.d, *w = f.w;
+    double vf[3];
+    if (ident) v3_copy(vf, v);
+    else m3_tmulv(vf, f.E, v);
+
+    /* normal (frame coordinates), indentation, its rate, force direction */
+    double N[3], delta, ddelta, dir[3];
+    int flat = ident || w[0] == 0.0;
+    if (drive) {
+        /* normal of the running surface: (1 - y w_z) b - y w_x t */
+        if (flat) {
+            v3_set(N, 0.0, 0.0, 1.0);
+        } else {
+            v3_set(N, -d[1] * w[0], 0.0, 1.0 - d[1] * w[2]);
+            v3_scale(N, N, 1.0 / v3_norm(N));
+        }
+        delta = r - (d[0] * N[0] + d[2] * N[2]);
+        ddelta = -v3_dot(N, vf);
+        v3_copy(dir, N);
+    } else {
+        /* normal of the face at h: (1 - h w_z + z w_y) n + z w_x t, and the
+         * wheel's clearance to it measured towards the track centre */
+        if (flat) {
+            v3_set(N, 0.0, 1.0, 0.0);
+        } else {
+            v3_set(N, d[2] * w[0], 1.0 - h * w[2] + d[2] * w[1], 0.0);
+            v3_scale(N, N, 1.0 / v3_norm(N));
+        }
+        delta = r + side * (d[0] * N[0] + (d[1] - h) * N[1]);
+        ddelta = side * v3_dot(N, vf);
+        v3_scale(dir, N, -side);
+    }
+    double vt = vf[0];
+    cs->wheel_speed[k] = vt / r;
+    int slot = N_SLOT * i + SLOT_WHEEL + k;
+    double fn = 0.0;
+    if (delta > 0) {
+        const ContactLaw *law = &m->law[drive ? CC_RW : CC_SW];
+        double fe;
+        fn = contact_force(law, delta, ddelta, contact_vi(c->st.v_onset[slot], ddelta, m->v_min), &fe);
+        acc->p_damp += (fn - fe) * ddelta;
+        double sg = smooth_sign(vt), froll = m->mu_roll * fn;
+        acc->p_roll += froll * sg * vt;
+        /* force in the frame, then in base coordinates; applied at the
+         * contact point, a wheel radius from the centre */
+        double ff[3], fv[3], db[3], arm[3], tmp[3];
+        v3_scale(ff, dir, fn);
+        ff[0] -= froll * sg;
+        if (ident) {
+            v3_copy(fv, ff);
+            v3_copy(db, dir);
+        } else {
+            m3_mulv(fv, f.E, ff);
+            m3_mulv(db, f.E, dir);
+        }
+        v3_copy(arm, rc);
+        v3_axpy(arm, -r, db);
+        v3_add(acc->F, acc->F, fv);
+        v3_cross(tmp, arm, fv);
+        v3_add(acc->T, acc->T, tmp);
+    }
+    sc->delta[slot] = delta;
+    sc->ddelta[slot] = ddelta;
+    sc->force[slot] = fn;
+}
+
+static ALWAYS_INLINE void four_wheels(Chain *c, int i, const CartLocal *L, const TrackBase *b, const double *xs,
+                                      const double *xd, const int kind, WheelSum *acc) {
+    one_wheel(c, i, L, b, xs, W_SL, kind, acc);
+    one_wheel(c, i, L, b, xs, W_SR, kind, acc);
+    one_wheel(c, i, L, b, xd, W_DL, kind, acc);
+    one_wheel(c, i, L, b, xd, W_DR, kind, acc);
+}
+
+void wheel_forces(Chain *c, int i, const CartLocal *L, double *p_damp, double *p_roll) {
+    const CartGeometry *g = &c->m.g;
+    CartScratch *cs = &c->sc.cart[i];
     const TrackBase *b = &cs->base;
     const double *M = L->M;
-    double Fl[3] = {0, 0, 0}, Tl[3] = {0, 0, 0};
     /* the body's x and z axis parts of the wheel centres, shared by each pair */
     double xs[3], xd[3];
     for (int j = 0; j < 3; j++) {
         xd[j] = M[3 * j] * g->x_axle + M[3 * j + 2] * g->z_axle;
         xs[j] = M[3 * j] * g->x_axle + M[3 * j + 2] * g->z_steer;
     }
-
-    for (int k = 0; k < N_WHEEL; k++) {
-        int drive = (k == W_DL || k == W_DR);
-        double side = (k == W_SL || k == W_DL) ? 1.0 : -1.0;
-        double yb = side * (drive ? g->y_drive : g->y_steer), r = drive ? g->r_drive : g->r_steer;
-        const double *x0 = drive ? xd : xs;
-        double rc[3], q[3], v[3];
-        for (int j = 0; j < 3; j++) rc[j] = x0[j] + M[3 * j + 1] * yb;
-        v3_add(q, L->q, rc);
-        v3_cross(v, L->om, rc);
-        v3_add(v, v, L->v);
-        double h = side * g->guide_half;
-        int face = drive ? TL_RUNNING : TL_GUIDE;
-        LocalFrame f;
-        if (!tl_project(b, q, L->axle.ds, face, h, &f))
-            track_project_face(&m->track, b, q, L->axle.ds, face, h, &cs->el, &f);
-        const double *E = f.E, *d = f.d, *w = f.w;
-        double vf[3], Nf[3], delta, ddelta, dir[3];
-        m3_tmulv(vf, E, v);
-        if (drive) {
-            /* normal of the running surface: (1 - y w_z) b - y w_x t */
-            if (w[0] == 0.0) {
-                v3_set(Nf, 0.0, 0.0, 1.0);
-            } else {
-                v3_set(Nf, -d[1] * w[0], 0.0, 1.0 - d[1] * w[2]);
-                v3_scale(Nf, Nf, 1.0 / v3_norm(Nf));
-            }
-            delta = r - (d[0] * Nf[0] + d[2] * Nf[2]);
-            ddelta = -v3_dot(Nf, vf);
-            v3_copy(dir, Nf);
-        } else {
-            /* normal of the face at h: (1 - h w_z + z w_y) n + z w_x t, and
-             * the wheel's clearance to it measured towards the track centre */
-            if (w[0] == 0.0) {
-                v3_set(Nf, 0.0, 1.0, 0.0);
-            } else {
-                v3_set(Nf, d[2] * w[0], 1.0 - h * w[2] + d[2] * w[1], 0.0);
-                v3_scale(Nf, Nf, 1.0 / v3_norm(Nf));
-            }
-            delta = r + side * (d[0] * Nf[0] + (d[1] - h) * Nf[1]);
-            ddelta = side * v3_dot(Nf, vf);
-            v3_scale(dir, Nf, -side);
-        }
-        double vt = vf[0];
-        cs->wheel_speed[k] = vt / r;
-        int slot = N_SLOT * i + SLOT_WHEEL + k;
-        double fn = 0.0;
-        if (delta > 0) {
-            const ContactLaw *law = &m->law[drive ? CC_RW : CC_SW];
-            double fe;
-            fn = contact_force(law, delta, ddelta, contact_vi(st->v_onset[slot], ddelta, m->v_min), &fe);
-            *p_damp += (fn - fe) * ddelta;
-            double sg = smooth_sign(vt), froll = m->mu_roll * fn;
-            *p_roll += froll * sg * vt;
-            /* force in the frame, then in base coordinates */
-            double ff[3], fv[3], db[3], arm[3], tmp[3];
-            v3_scale(ff, dir, fn);
-            ff[0] -= froll * sg;
-            m3_mulv(fv, E, ff);
-            m3_mulv(db, E, dir);
-            /* applied at the contact point, a wheel radius from the centre */
-            v3_copy(arm, rc);
-            v3_axpy(arm, -r, db);
-            v3_add(Fl, Fl, fv);
-            v3_cross(tmp, arm, fv);
-            v3_add(Tl, Tl, tmp);
-        }
-        sc->delta[slot] = delta;
-        sc->ddelta[slot] = ddelta;
-        sc->force[slot] = fn;
+    WheelSum acc = {{0, 0, 0}, {0, 0, 0}, *p_damp, *p_roll};
+    switch (b->kind) {
+    case TL_STRAIGHT: four_wheels(c, i, L, b, xs, xd, TL_STRAIGHT, &acc); break;
+    case TL_PLANAR: four_wheels(c, i, L, b, xs, xd, TL_PLANAR, &acc); break;
+    default: four_wheels(c, i, L, b, xs, xd, TL_TWISTED, &acc); break;
     }
+    *p_damp = acc.p_damp;
+    *p_roll = acc.p_roll;
     double tmp[3];
-    m3_mulv(tmp, b->R, Fl);
+    m3_mulv(tmp, b->R, acc.F);
     v3_add(cs->F, cs->F, tmp);
-    m3_mulv(tmp, b->R, Tl);
+    m3_mulv(tmp, b->R, acc.T);
     v3_add(cs->T, cs->T, tmp);
 }

@@ -351,7 +351,9 @@ def run_key(rng: np.random.Generator) -> int:
     return int(rng.integers(0, 2**63 - 1))
 
 
-def reflect(xc: np.ndarray, xw: np.ndarray, alpha: float, noise: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def reflect(xc: np.ndarray, xw: np.ndarray, alpha: float, noise: np.ndarray,
+            lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Reflect ``xw`` through ``xc`` by ``alpha``, perturb, clip into the box."""
     return np.clip(xc + alpha * (xc - xw) + noise, lo, hi)
 
 

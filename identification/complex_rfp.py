@@ -32,10 +32,12 @@ from __future__ import annotations
 
 import copy
 import heapq
+import json
 import math
 import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -87,6 +89,91 @@ def dask_map(client: Any, pure: bool = False) -> MapFn:
         return client.gather(futures)
 
     return _map
+
+
+def _read_replay(replay: Any) -> dict[bytes, tuple[float, bool, str | None]]:
+    """Recorded evaluations as ``{x.tobytes(): (f, bad, error)}``.
+
+    ``replay``: a path to an evaluation log written with ``eval_log`` (JSON lines; a
+    torn last line is ignored), a :class:`ComplexResult` or :class:`ComplexHistory`,
+    or an iterable of ``(x, f)`` pairs.
+    """
+    out: dict[bytes, tuple[float, bool, str | None]] = {}
+    if replay is None:
+        return out
+
+    def put(x: Any, f: Any, bad: bool = False, err: str | None = None) -> None:
+        xa = np.asarray(x, dtype=float).ravel()
+        fv = math.inf if f is None else float(f)
+        bad = bool(bad) or not math.isfinite(fv)
+        out[xa.tobytes()] = (math.inf if bad else fv, bad, err)
+
+    if isinstance(replay, (str, os.PathLike)):
+        path = Path(replay)
+        if not path.exists():
+            return out
+        with path.open() as fh:
+            for line in fh:
+                try:
+                    rec = json.loads(line)
+                    put(rec["x"], rec["f"], rec.get("bad", False), rec.get("error"))
+                except (ValueError, KeyError, TypeError):
+                    continue  # a line torn by a kill
+        return out
+    hist = getattr(replay, "history", replay)
+    if hasattr(hist, "x") and hasattr(hist, "f"):
+        errors = dict(getattr(hist, "errors", []))
+        for i, (x, f) in enumerate(zip(hist.x, hist.f)):
+            put(x, f, bool(hist.bad[i]), errors.get(i))
+        return out
+    for x, f in replay:
+        put(x, f)
+    return out
+
+
+class _Evaluator:
+    """Batches through the executor / map_fn, with replay of recorded evaluations
+    and an append-only evaluation log."""
+
+    def __init__(self, safe: SafeObjective, executor: Any, map_fn: MapFn | None,
+                 replay: dict[bytes, tuple[float, bool, str | None]], eval_log: Any):
+        self.safe, self.executor, self.map_fn, self.replay = safe, executor, map_fn, replay
+        self.log = None
+        if eval_log is not None:
+            Path(eval_log).parent.mkdir(parents=True, exist_ok=True)
+            self.log = open(eval_log, "a")
+
+    def close(self) -> None:
+        if self.log is not None:
+            self.log.close()
+
+    def lookup(self, x: np.ndarray) -> tuple[float, bool, str | None] | None:
+        return self.replay.get(x.tobytes())
+
+    def batch(self, xs: list[np.ndarray]) -> tuple[list[tuple[float, bool, str | None]], list[bool]]:
+        """Results for ``xs`` and, per point, whether it came from the replay."""
+        outs: list[Any] = [self.lookup(x) for x in xs]
+        replayed = [o is not None for o in outs]
+        todo = [x for x, o in zip(xs, outs) if o is None]
+        if todo:
+            if self.map_fn is not None:
+                res = list(self.map_fn(self.safe, todo))
+            elif self.executor is not None:
+                res = list(self.executor.map(self.safe, todo))
+            else:
+                res = [self.safe(x) for x in todo]
+            if len(res) != len(todo):
+                raise RuntimeError(f"map returned {len(res)} results for {len(todo)} points")
+            it = iter(res)
+            outs = [o if o is not None else next(it) for o in outs]
+            if self.log is not None:
+                for x, (f, bad, err), rep in zip(xs, outs, replayed):
+                    if not rep:
+                        line = {"x": np.asarray(x).tolist(), "f": None if bad else float(f), "bad": bool(bad),
+                                "error": err}
+                        self.log.write(json.dumps(line) + "\n")
+                self.log.flush()
+        return [(float(f), bool(bad), err) for f, bad, err in outs], replayed
 
 
 def _cpu_count() -> int:
@@ -273,6 +360,8 @@ def minimize_complex_parallel(
     progress: bool = False,
     retract_decay: float = DEFAULT_RETRACT_DECAY,
     max_retractions: int = DEFAULT_MAX_RETRACTIONS,
+    eval_log: str | os.PathLike | None = None,
+    replay: Any = None,
 ) -> ComplexResult:
     """Complex-RF with up to ``n_parallel`` objective evaluations per round.
 
@@ -287,6 +376,15 @@ def minimize_complex_parallel(
     map_fn : instead of ``executor``: ``map_fn(fn, xs)`` returning the results in
         order, e.g. ``dask_map(client)``. With neither, the batch is evaluated in
         this process, one point after the other (same run, no speed-up).
+
+    eval_log : path of an append-only log (JSON lines) of every evaluation, written
+        as each batch returns.
+    replay : recorded evaluations to reuse instead of calling ``fun`` - an
+        ``eval_log`` path (may be the same path), a ComplexResult / ComplexHistory,
+        or ``(x, f)`` pairs.  With the same seed and settings the run retraces the
+        recorded one exactly, so an interrupted run restarted with
+        ``replay=eval_log`` loses no evaluation.  Replayed points have ``round = -1``
+        in the history and cost no round.
 
     ``result.nrounds`` counts the rounds (batches, including the initial complex).
     ``result.nfev`` counts every evaluation, ``result.nfev_used`` those the method
@@ -312,39 +410,29 @@ def minimize_complex_parallel(
 
     span = hi - lo
     rng = make_rng(seed)
-    safe = SafeObjective(fun, args)
+    ev = _Evaluator(SafeObjective(fun, args), executor, map_fn, _read_replay(replay), eval_log)
     rec = _Recorder(m, max_evals, progress, f"Complex-RFP x{p}")
-
-    def run_batch(xs: list[np.ndarray]) -> list[tuple[float, bool, str | None]]:
-        if not xs:
-            return []
-        if map_fn is not None:
-            out = list(map_fn(safe, xs))
-        elif executor is not None:
-            out = list(executor.map(safe, xs))
-        else:
-            out = [safe(x) for x in xs]
-        if len(out) != len(xs):
-            raise RuntimeError(f"map returned {len(out)} results for {len(xs)} points")
-        return [(float(f), bool(bad), err) for f, bad, err in out]
-
     try:
         X = initial_complex(rng, k, lo, hi, x0a)
         F = np.empty(k)
-        for i, out in enumerate(run_batch([X[i] for i in range(k)])):
-            idx = rec.record(X[i], out, "init", 0, i // p)
+        outs, replayed = ev.batch([X[i] for i in range(k)])
+        n_real = 0
+        for i, (out, rep) in enumerate(zip(outs, replayed)):
+            idx = rec.record(X[i], out, "init", 0, -1 if rep else n_real // p)
+            n_real += not rep
             rec.accept(idx)
             F[i] = out[0]
-        rounds = -(-k // p)
-        rec.iteration_row(0, rounds - 1, F, X, span)
+        rounds = -(-n_real // p)
+        rec.iteration_row(0, max(rounds - 1, 0), F, X, span)
         ctx = _Ctx(lo=lo, hi=hi, span=span, k=k, alpha=alpha, rfak=rfak,
                    kf=forgetting_constant(alpha, gamma, k), f_tol=f_tol, x_tol=x_tol,
                    decay=retract_decay, max_ret=int(max_retractions), max_evals=max_evals,
                    base=run_key(rng))
         run = _run_speculative if strategy == "speculative" else _run_multidirection
-        X, F, nit, rounds, status = run(ctx, X, F, rec, run_batch, p, rounds, callback)
+        X, F, nit, rounds, status = run(ctx, X, F, rec, ev, p, rounds, callback)
     finally:
         rec.close()
+        ev.close()
 
     return _build_result(rec, X, F, nit, rounds, status, dict(
         method=f"complex-rfp/{strategy}", n_points=k, alpha=alpha, rfak=rfak, gamma=gamma,
@@ -352,7 +440,7 @@ def minimize_complex_parallel(
         retract_decay=retract_decay, max_retractions=int(max_retractions), n_parallel=p))
 
 
-def _run_speculative(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, run_batch: Callable,
+def _run_speculative(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, ev: _Evaluator,
                      p: int, rounds: int, callback: Callable | None):
     machine = _Machine(ctx, X, F)
     cache: dict[bytes, int] = {}  # evaluated point -> evaluation index
@@ -370,7 +458,10 @@ def _run_speculative(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, ru
                 break
             idx = cache.get(x.tobytes())
             if idx is None:
-                break
+                out = ev.lookup(x)
+                if out is None:
+                    break
+                idx = cache[x.tobytes()] = rec.record(x, out, machine.kind, machine.nit, -1, discarded=True)
             rec.use(idx)
             kind = machine.kind
             accepted, ended = machine.feed(f_of(idx))
@@ -387,13 +478,14 @@ def _run_speculative(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, ru
             break
         p_accept = {kd: a / n for kd, (a, n) in counts.items()}
         batch = _speculate(machine, p, cache, f_of, p_accept)
-        for (xb, kind, it), out in zip(batch, run_batch([b[0] for b in batch])):
-            cache[xb.tobytes()] = rec.record(xb, out, kind, it, rounds, discarded=True)
-        rounds += 1
+        outs, replayed = ev.batch([b[0] for b in batch])
+        for (xb, kind, it), out, rep in zip(batch, outs, replayed):
+            cache[xb.tobytes()] = rec.record(xb, out, kind, it, -1 if rep else rounds, discarded=True)
+        rounds += not all(replayed)
     return machine.X, machine.F, machine.nit, rounds, status
 
 
-def _run_multidirection(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, run_batch: Callable,
+def _run_multidirection(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, ev: _Evaluator,
                         p: int, rounds: int, callback: Callable | None):
     k, span = ctx.k, ctx.span
     d = max(1, min(p, k // 2))
@@ -429,8 +521,9 @@ def _run_multidirection(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder,
                 noise = random_term(ctx.base, mv.iteration, mv.q, ctx.rfak, span, x_spread(X, span))
                 x = retract(mv.xc, X[b], X[mv.w], mv.q, ctx.decay, noise, ctx.lo, ctx.hi)
                 plan.append((mv, x, "retract"))
-        for (mv, x, kind), out in zip(plan, run_batch([pl[1] for pl in plan])):
-            idx = rec.record(x, out, kind, mv.iteration, rounds)
+        outs, replayed = ev.batch([pl[1] for pl in plan])
+        for (mv, x, kind), out, rep in zip(plan, outs, replayed):
+            idx = rec.record(x, out, kind, mv.iteration, -1 if rep else rounds)
             w = mv.w
             X[w] = x
             F[w] = R[w] = out[0]
@@ -450,7 +543,7 @@ def _run_multidirection(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder,
         nit += done
         moves = [mv for mv in moves if not mv.done]
         rec.iteration_row(nit, rounds, F, X, span)
-        rounds += 1
+        rounds += not all(replayed)
         if callback is not None and callback(intermediate(rec, nit, F)) is True:
             status = STATUS_CALLBACK
             break

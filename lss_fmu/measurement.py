@@ -555,10 +555,6 @@ def read_samples(path: Union[str, Path], sample_rate: float) -> pd.DataFrame:
     return df
 
 
-def _format_float(v: float) -> str:
-    return repr(float(v))
-
-
 def format_samples(df: pd.DataFrame, comments: Optional[list] = None) -> str:
     out = [f"# {c}".rstrip() for c in (comments or [])]
     out.append(",".join(COLUMNS))

@@ -9,7 +9,6 @@ the FMU's own words.
 from __future__ import annotations
 
 import atexit
-import ctypes
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,8 @@ import pandas as pd
 from fmpy import calloc as fmpy_calloc, extract, free as fmpy_free, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Real, fmi2ValueReference)
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2Error, fmi2Real, fmi2ValueReference,
+                       fmi2Warning)
 
 from . import build
 from .variables import BY_NAME, FORCE_CHANNELS, SPEED_CHANNELS
@@ -67,11 +67,10 @@ class ChainSimulator:
         self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy_calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy_free)
-        try:
-            from fmpy.logging import addLoggerProxy
-            addLoggerProxy(ctypes.byref(self._callbacks))
-        except Exception:  # pragma: no cover - fmpy without its native logger proxy
-            pass
+        # No fmpy.logging.addLoggerProxy: it keeps ONE global logger, so with two
+        # simulators in a process every message would land in the last one's list.
+        # LSSChain passes its messages pre-formatted (no varargs, '%' doubled), so
+        # the callback only has to undo the doubling (see _log).
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzipdir,
                              modelIdentifier=self.md.coSimulation.modelIdentifier,
                              instanceName=instance_name)
@@ -82,7 +81,7 @@ class ChainSimulator:
     # -- messages ---------------------------------------------------------------
     def _log(self, env, instance, status, category, message):
         self.messages.append((int(status), (category or b"").decode(errors="replace"),
-                              (message or b"").decode(errors="replace")))
+                              (message or b"").decode(errors="replace").replace("%%", "%")))
 
     def _fail(self, what: str, exc: Exception) -> SimulationError:
         errs = [m for s, _, m in self.messages if s >= 2]
@@ -170,27 +169,37 @@ class ChainSimulator:
         nv = len(vrs)
         c_vr = (fmi2ValueReference * nv)(*vrs)
         c_val = (fmi2Real * nv)()
-        get_real = self.fmu.fmi2GetReal
-        do_step = self.fmu.fmi2DoStep
+        # The loop calls the FMU's C functions directly (fmpy's wrappers add a
+        # Python call and a status check per call); a status above fmi2Warning
+        # raises as fmpy would. val is a numpy view of the output buffer.
+        raw = getattr(self.fmu, "_functions", {})
+        get_real = raw.get("fmi2GetReal") or self.fmu.fmi2GetReal
+        do_step = raw.get("fmi2DoStep") or self.fmu.fmi2DoStep
         comp = self.fmu.component
+        val = np.frombuffer(c_val, dtype=np.float64)
         data = np.empty((n + 1, nv))
-        times = start_time + step * np.arange(n + 1)
+        times = (start_time + step * np.arange(n + 1)).tolist()
         try:
-            get_real(comp, c_vr, nv, c_val)
-            data[0] = c_val
+            if get_real(comp, c_vr, nv, c_val) > fmi2Warning:
+                raise FMICallException(function="fmi2GetReal", status=fmi2Error)
+            data[0] = val
             t = start_time
             for k in range(1, n + 1):
                 if on_step is not None:
                     on_step(self, t)
                 t_next = times[k]
-                do_step(comp, t, t_next - t, 1)
+                status = do_step(comp, t, t_next - t, 1)
+                if status > fmi2Warning:
+                    raise FMICallException(function="fmi2DoStep", status=status)
                 t = t_next
-                get_real(comp, c_vr, nv, c_val)
-                data[k] = c_val
+                if get_real(comp, c_vr, nv, c_val) > fmi2Warning:
+                    raise FMICallException(function="fmi2GetReal", status=fmi2Error)
+                data[k] = val
         except FMICallException as exc:
             self.time = t
             raise self._fail(f"simulation failed after t = {t:g} s", exc) from None
         self.time = t
+        times = np.asarray(times)
         keep = times >= record_from - 1e-12
         df = pd.DataFrame(data[keep], columns=list(outputs))
         df.insert(0, "time", times[keep])

@@ -1,7 +1,6 @@
 """Shared helpers for the FMI tests: one extracted copy of build/LSSChain.fmu
 per test session, and `Slave`, an fmpy FMU2Slave whose log messages are
-captured (through fmpy's native logger proxy, so the FMU's printf-style
-messages arrive formatted) and whose calls can be made either through fmpy
+captured per instance and whose calls can be made either through fmpy
 (exceptions on error) or raw (the status code as an int)."""
 from __future__ import annotations
 
@@ -30,15 +29,16 @@ def fmu_file() -> Path:
 
 
 @lru_cache(maxsize=1)
-def model_description():
-    return read_model_description(str(fmu_file()))
-
-
-@lru_cache(maxsize=1)
 def unzipdir() -> str:
     d = extract(str(fmu_file()))
     atexit.register(shutil.rmtree, d, True)
     return d
+
+
+@lru_cache(maxsize=1)
+def model_description():
+    """Read from the extracted copy, so that it always matches the binary used."""
+    return read_model_description(unzipdir())
 
 
 def vr(name: str) -> int:
@@ -66,8 +66,8 @@ class Slave:
         self.cb.logger = fmi2CallbackLoggerTYPE(self._log)
         self.cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(fmpy_calloc)
         self.cb.freeMemory = fmi2CallbackFreeMemoryTYPE(fmpy_free)
-        from fmpy.logging import addLoggerProxy
-        addLoggerProxy(ctypes.byref(self.cb))
+        # not fmpy.logging.addLoggerProxy: it keeps one global logger for the whole
+        # process, so messages of several instances would all land in the last one
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory or unzipdir(),
                              modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         self.name = name
@@ -84,8 +84,9 @@ class Slave:
                 self.fmu.callbacks = self.cb
 
     def _log(self, env, instance, status, category, message):
+        # LSSChain logs pre-formatted text (no varargs) with '%' doubled
         self.messages.append((int(status), (category or b"").decode(errors="replace"),
-                              (message or b"").decode(errors="replace")))
+                              (message or b"").decode(errors="replace").replace("%%", "%")))
 
     # -- messages --------------------------------------------------------------------
     def clear(self) -> None:

@@ -82,7 +82,7 @@ def test_shifted_sphere_always_found(m):
 def test_rosenbrock_2d_success_rate():
     bounds = [(-2.048, 2.048)] * 2
     rate = success_rate(rosenbrock, bounds, np.ones(2), range(20))
-    assert rate >= 0.85  # measured 92 % over 50 seeds, 95 % over seeds 0-19
+    assert rate >= 0.85  # measured: 100 % on these seeds, 92 % over seeds 0-49
 
 
 def test_rosenbrock_4d_with_larger_complex_run_to_budget():
@@ -285,7 +285,8 @@ def test_parallel_fewer_rounds_for_the_same_budget():
     spec = minimize_complex_parallel(shifted_sphere, bounds, n_parallel=4, **kw)
     md = minimize_complex_parallel(shifted_sphere, bounds, n_parallel=4, strategy="multidirection", **kw)
     assert serial.nfev == spec.nfev_used == md.nfev == 400
-    assert spec.nrounds < serial.nrounds / 2 and md.nrounds < serial.nrounds / 2
+    # 4 evaluations per round; multi-direction moves at most half the complex (2 of 5 points)
+    assert spec.nrounds < serial.nrounds / 2 and md.nrounds <= serial.nrounds / 2
     assert spec.fun == serial.fun  # the same run
     # rounds until the objective first drops below 1e-4
     def rounds_to(res, target=1e-4):
@@ -328,3 +329,44 @@ def test_multidirection_finds_optima():
     hits = [found(minimize_complex_parallel(rosenbrock, b2, seed=s, n_parallel=4, strategy="multidirection"),
                   b2, np.ones(2)) for s in range(10)]
     assert np.mean(hits) >= 0.6  # measured 87 % over 30 seeds (serial: 92 %)
+
+
+class CountingRosenbrock:
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, x):
+        self.calls += 1
+        return rosenbrock(x)
+
+
+class Killed(Exception):
+    pass
+
+
+def test_interrupted_run_resumes_from_its_evaluation_log_without_losing_evaluations(tmp_path):
+    bounds = [(-2.048, 2.048)] * 3
+    kw = dict(seed=4, n_parallel=3, max_evals=800)
+    full = minimize_complex_parallel(rosenbrock, bounds, **kw)
+
+    def kill_at_iteration_120(state):
+        if state.nit >= 120:
+            raise Killed
+
+    log = tmp_path / "evals.jsonl"
+    first = CountingRosenbrock()
+    with pytest.raises(Killed):
+        minimize_complex_parallel(first, bounds, eval_log=log, callback=kill_at_iteration_120, **kw)
+    assert sum(1 for _ in log.open()) == first.calls > 0
+    with log.open("a") as fh:  # a line torn by the kill
+        fh.write('{"x": [0.1, ')
+    second = CountingRosenbrock()
+    res = minimize_complex_parallel(second, bounds, eval_log=log, replay=log, **kw)
+    assert first.calls + second.calls == full.nfev  # nothing evaluated twice, nothing lost
+    assert np.array_equal(res.x, full.x) and res.fun == full.fun and res.nit == full.nit
+    assert 0 < np.sum(res.history.round == -1) <= first.calls  # replayed, cost no round
+    # a serial result can be replayed too (n_parallel=1 is the serial method)
+    serial = minimize_complex(rosenbrock, bounds, seed=4, max_evals=800)
+    third = CountingRosenbrock()
+    again = minimize_complex_parallel(third, bounds, seed=4, n_parallel=1, max_evals=800, replay=serial)
+    assert third.calls == 0 and again.nrounds == 0 and np.array_equal(again.x, serial.x)

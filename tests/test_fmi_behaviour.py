@@ -18,6 +18,7 @@ from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
 from fmi_util import DISCARD, ERROR, OK, WARNING, Slave, model_description, run, unzipdir, var
+from lss_fmu import build
 
 STEP = 0.01
 
@@ -346,3 +347,52 @@ def test_bad_resource_location_warns_and_built_in_layouts_are_then_refused(tmp_p
     with Slave(resource_uri="http://example.com/resources") as s:
         s.init({"layout.name": str(layout)})
         s.fmu.doStep(0.0, STEP)
+
+
+# --- the source FMU ---------------------------------------------------------------------
+
+def test_sources_listed_in_the_model_description_are_complete(fmu_file):
+    import re
+    import zipfile
+    md = read_model_description_of(fmu_file)
+    listed = md.buildConfigurations[0].sourceFileSets[0].sourceFiles
+    with zipfile.ZipFile(fmu_file) as z:
+        names = {n[len("sources/"):] for n in z.namelist() if n.startswith("sources/") and not n.endswith("/")}
+        texts = {n: z.read("sources/" + n).decode() for n in names}
+    assert set(listed) == {n for n in names if n.endswith(".c")}
+    assert not [n for n in listed if n.startswith("test_")]
+    for name, text in texts.items():  # every local include ships along
+        for inc in re.findall(r'#include\s+"([^"]+)"', text):
+            assert inc in names or inc.startswith("fmi2"), f"{name} includes {inc}, not in sources/"
+
+
+def read_model_description_of(path):
+    from fmpy import read_model_description
+    return read_model_description(str(path))
+
+
+@pytest.mark.skipif(shutil.which("cmake") is None, reason="fmpy compile needs cmake")
+def test_fmpy_compile_builds_the_source_fmu(fmu_file, tmp_path):
+    """`fmpy compile` (CMake, the compiler found there) rebuilds the binary from
+    sources/ of a copy without binaries; the result runs like the original."""
+    import subprocess
+    import sys
+    import zipfile
+    copy = tmp_path / "source only" / "LSSChain.fmu"
+    copy.parent.mkdir()
+    with zipfile.ZipFile(fmu_file) as src, zipfile.ZipFile(copy, "w", zipfile.ZIP_DEFLATED) as dst:
+        for item in src.infolist():
+            if not item.filename.startswith("binaries/"):
+                dst.writestr(item, src.read(item))
+    res = subprocess.run([sys.executable, "-m", "fmpy", "compile", str(copy)], capture_output=True, text=True,
+                         cwd=tmp_path, timeout=600)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    with zipfile.ZipFile(copy) as z:
+        assert any(n.startswith("binaries/") and n.endswith(build.shared_suffix()) for n in z.namelist())
+    assert validate_fmu(str(copy)) == []
+    from lss_fmu.runner import ChainSimulator
+    outs = ["chain.v_mean", "transducer.joint.F_x", "transducer.driving.F_left"]
+    with ChainSimulator(copy) as rebuilt, ChainSimulator(fmu_file) as original:
+        a = rebuilt.simulate(0.2, STEP, outputs=outs)
+        b = original.simulate(0.2, STEP, outputs=outs)
+    assert np.allclose(a.to_numpy(), b.to_numpy(), rtol=1e-6, atol=1e-6)

@@ -51,3 +51,30 @@ def test_layout7_forces_match_pre_optimisation_reference(sim, reference, transdu
     assert h.max() <= limit, dict(zip(FORCE_CHANNELS, np.round(h * 100, 3)))
     s_ref = reference[f"tr{transducer}:transducer.s"].to_numpy()
     assert np.max(np.abs(df["transducer.s"].to_numpy() - s_ref)) < 1e-4  # m
+
+
+@pytest.mark.parametrize("layout", ["layout7", "layout1", "layout3", "demo"])
+def test_local_projection_matches_world_search(layout):
+    """The trigonometry-free projections (fmu_src/track_local.h: straights
+    and plane arcs in closed form, helices by Newton from a base frame)
+    give the same closest points and frames as the world-frame search with
+    track_frame, to its own convergence (1e-12 m), on every face."""
+    from lss_fmu import ccore
+
+    ffi, lib = ccore.load()
+    p = lib.lss_params_new()
+    lib.lss_params_set_string(p, b"layout.name", layout.encode())
+    err = ffi.new("char[1024]")
+    c = lib.lss_chain_new(p, str(Path(__file__).parent.parent / "fmu_src" / "resources").encode(), err, 1024)
+    lib.lss_params_free(p)
+    assert c != ffi.NULL, ffi.string(err).decode()
+    try:
+        out = ffi.new("double[5]")
+        n = lib.lss_chain_check_local(c, 50000, 7, out)
+    finally:
+        lib.lss_chain_free(c)
+    ds, d, E, residual, declined = list(out)
+    assert n > 45000
+    assert ds < 1e-11 and d < 1e-11 and E < 1e-11, (ds, d, E)
+    assert residual < 1e-11
+    assert declined < 0.02  # the rest goes to the world search, which crosses elements
