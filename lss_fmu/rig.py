@@ -93,7 +93,7 @@ TEST_PLAN = {
 # straights over one lap at 2 m/s is about 900 N (docs/measurements.md,
 # `calibrate_pretension`).
 NOMINAL_PRETENSION = {
-    "layout1": 0.035, "layout2": 0.035, "layout3": 0.090, "layout4": 0.030,
+    "layout1": 0.035, "layout2": 0.035, "layout3": 0.090, "layout4": 0.031,
     "layout5": 0.022, "layout6": 0.025, "layout7": 0.023, "demo": 0.015, "oval": 0.012,
 }
 

@@ -1,0 +1,137 @@
+"""The paper's section 4 from a campaign's results: a Table-3 style CoR table
+per model, the final objectives per model with a one-way ANOVA and a
+Kruskal-Wallis test (objectives are not normal), and box plots of the CoRs
+per contact class and per wheel or joint type with the bounds drawn
+(Figs. 12-16). One Markdown report with its figures.
+
+    lss report CAMPAIGN_DIR
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from lss_fmu.atomic import write_atomic
+
+from .problem import COR_BOUNDS, DESIGN
+
+CORS = {"contact.e_JA": "e_JA", "contact.e_JR": "e_JR", "contact.e_SW": "e_SW", "contact.e_RW": "e_RW"}
+
+
+def load_results(campaign: Path) -> pd.DataFrame:
+    files = sorted((Path(campaign) / "results").glob("*.json"))
+    if not files:
+        raise FileNotFoundError(f"{campaign}/results holds no result: run `lss campaign` first")
+    rows = []
+    for f in files:
+        r = json.loads(f.read_text())
+        row = {"measurement": r["measurement"], "number": r.get("number"), "model": r["model"], "f": r["f"],
+               "f0": r["f0"], "nfev": r["nfev"], "wheel_type": r.get("wheel_type"),
+               "coupling_type": r.get("coupling_type"), "layout": r.get("layout")}
+        for k, short in CORS.items():
+            row[short] = r["values"].get(short, np.nan)
+        rows.append(row)
+    return pd.DataFrame(rows).sort_values(["model", "number", "measurement"])
+
+
+def model_tests(df: pd.DataFrame) -> dict:
+    groups = [g["f"].to_numpy() for _, g in df.groupby("model") if len(g) > 1]
+    if len(groups) < 2:
+        return {"anova_p": float("nan"), "kruskal_p": float("nan"), "note": "fewer than two models"}
+    anova = stats.f_oneway(*groups)
+    kw = stats.kruskal(*groups)
+    return {"anova_F": float(anova.statistic), "anova_p": float(anova.pvalue),
+            "kruskal_H": float(kw.statistic), "kruskal_p": float(kw.pvalue)}
+
+
+def _box(ax, data: dict, title: str, bounds=None, log=False):
+    labels = list(data)
+    ax.boxplot([np.asarray(data[k], float) for k in labels], tick_labels=labels)
+    if bounds:
+        for b in bounds:
+            ax.axhline(b, ls=":", color="k", lw=1)
+    if log:
+        ax.set_yscale("log")
+    ax.set_title(title, fontsize=9)
+    ax.grid(alpha=0.3)
+
+
+def make_figures(df: pd.DataFrame, out: Path) -> list[str]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    figs = []
+    fig, ax = plt.subplots(figsize=(6, 4))
+    _box(ax, {m: g["f"] for m, g in df.groupby("model")}, "final objectives per contact model", log=True)
+    fig.tight_layout()
+    fig.savefig(out / "objectives.png", dpi=100)
+    fig.savefig(out / "objectives.svg")
+    plt.close(fig)
+    figs.append("objectives.png")
+    for short, group_col in (("e_JA", "coupling_type"), ("e_JR", "coupling_type"),
+                             ("e_SW", "wheel_type"), ("e_RW", "wheel_type")):
+        types = sorted(t for t in df[group_col].dropna().unique())
+        fig, axes = plt.subplots(1, max(1, len(types)), figsize=(4.5 * max(1, len(types)), 3.8), squeeze=False)
+        for ax, t in zip(axes[0], types or [None]):
+            sub = df if t is None else df[df[group_col] == t]
+            _box(ax, {m: g[short] for m, g in sub.groupby("model")},
+                 f"{short}, {group_col.replace('_', ' ')} {t} (n={len(sub) // max(1, sub['model'].nunique())})",
+                 bounds=COR_BOUNDS)
+            ax.set_ylim(0, 1)
+        fig.tight_layout()
+        name = f"cor_{short}.png"
+        fig.savefig(out / name, dpi=100)
+        fig.savefig(out / name.replace(".png", ".svg"))
+        plt.close(fig)
+        figs.append(name)
+    return figs
+
+
+def write_report(campaign: Path) -> Path:
+    campaign = Path(campaign)
+    df = load_results(campaign)
+    out = campaign / "report"
+    out.mkdir(exist_ok=True)
+    tests = model_tests(df)
+    figs = make_figures(df, out)
+    lines = ["# Campaign report", "",
+             f"{df['measurement'].nunique()} measurements x {df['model'].nunique()} contact models "
+             f"({len(df)} identifications) from `{campaign}`.", "",
+             "## Final objectives per contact model", "", "![objectives](objectives.png)", ""]
+    summ = df.groupby("model")["f"].describe()[["count", "mean", "std", "25%", "50%", "75%"]]
+    lines += [summ.to_markdown(floatfmt=".4g"), ""]
+    lines += [f"One-way ANOVA on the final objectives: F = {tests.get('anova_F', float('nan')):.3g}, "
+              f"p = {tests['anova_p']:.3g}. Kruskal-Wallis (rank-based): H = {tests.get('kruskal_H', float('nan')):.3g}, "
+              f"p = {tests['kruskal_p']:.3g}. "
+              + ("No model is statistically better at the 5 % level."
+                 if tests["anova_p"] >= 0.05 and tests["kruskal_p"] >= 0.05
+                 else "At the 5 % level the models differ."), ""]
+    for model, g in df.groupby("model"):
+        lines += [f"## Coefficients of restitution, model {model}", ""]
+        tab = g[["measurement", "e_JA", "e_JR", "e_SW", "e_RW", "f"]].reset_index(drop=True)
+        lines += [tab.to_markdown(index=False, floatfmt=".3f"), ""]
+    lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]
+    lines += [f"![{f}]({f})" for f in figs[1:]] + [""]
+    write_atomic(out / "report.md", "\n".join(lines))
+    from lss_fmu.atomic import write_json_atomic
+    write_json_atomic(out / "statistics.json", {"tests": tests, "summary": summ.reset_index().to_dict("records")})
+    return out / "report.md"
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="lss report", description=__doc__.splitlines()[0])
+    ap.add_argument("campaign")
+    args = ap.parse_args(argv)
+    path = write_report(Path(args.campaign))
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
