@@ -142,6 +142,48 @@ def scaling(results: list) -> dict:
                 spread=float(per_cart.max() / per_cart.min() - 1.0))
 
 
+def repeated_layout(name: str, k: int, out_dir) -> str:
+    """A layout that runs the built-in `name` k times over (the loop closes
+    after each lap, so the k laps close too; the track lies on itself, which
+    the model does not mind): the same mix of straights and curves and the
+    same physics per cart, k times the carts and motors."""
+    from pathlib import Path
+    src = (RESOURCES / "layouts" / f"{name}.layout").read_text().splitlines()
+    head, body = [], []
+    for line in src:
+        word = line.split("#")[0].split()
+        if not word:
+            continue
+        if word[0] in ("straight", "curve", "vcurve", "spiral"):
+            body.append(line)
+        elif word[0] == "name":
+            head.append(f"name {name}x{k}")
+        elif word[0] == "motors":
+            head.append(f"motors {int(word[1]) * k}")
+        elif word[0] == "carts":
+            head.append(f"carts {int(word[1]) * k}")
+        else:
+            head.append(line)
+    path = Path(out_dir) / f"{name}x{k}.layout"
+    path.write_text("\n".join(head + body * k) + "\n")
+    return str(path)
+
+
+def scaling_fixed_mix(core: Core, name: str, ks, tol: float, settle: float, window: float, repeat: int) -> list:
+    """Throughput of `name` repeated k times: cost against carts at a fixed
+    mix of track elements (the built-in layouts differ in their share of
+    curves, which costs more per cart than straight track)."""
+    import tempfile
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        for k in ks:
+            r = measure(core, repeated_layout(name, k, d), tol, settle, window, 0.5, accuracy=False, repeat=repeat)
+            r["layout"] = f"{name}x{k}"
+            print(fmt(r), flush=True)
+            out.append(r)
+    return out
+
+
 def fmt(r: dict) -> str:
     s = (f"{r['layout']:8s} {r['carts']:4d} carts tol {r['tol']:.0e}: {r['throughput']:8.1f} cart-s/CPU-s "
          f"({r['cpu']:.2f} s CPU for {r['window']:.2f} s), {r['steps_per_s']:.0f} steps/s, "
@@ -155,13 +197,16 @@ def fmt(r: dict) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--layouts", nargs="+", default=list(WINDOWS))
+    ap.add_argument("--layouts", nargs="*", default=list(WINDOWS))
     ap.add_argument("--tol", type=float, nargs="+", default=[1e-4])
     ap.add_argument("--settle", type=float, default=1.0)
     ap.add_argument("--window", type=float, default=None, help="timed window, s (default per layout)")
     ap.add_argument("--horizon", type=float, default=0.5, help="restart piece, s")
     ap.add_argument("--repeat", type=int, default=1, help="timed runs per figure (best is kept)")
     ap.add_argument("--no-accuracy", action="store_true")
+    ap.add_argument("--mix", default=None, help="also: scaling at a fixed mix, this layout repeated --mix-k times")
+    ap.add_argument("--mix-k", type=int, nargs="+", default=[1, 2, 4, 8, 13])
+    ap.add_argument("--mix-window", type=float, default=1.0)
     ap.add_argument("--lib", default=None, help="core library to measure (default: build the current one)")
     ap.add_argument("--label", default="current")
     ap.add_argument("--json", default=None)
@@ -182,6 +227,13 @@ def main(argv=None):
             out.setdefault("scaling", {})[str(tol)] = sc
             print(f"tol {tol:.0e}: CPU ~ carts^{sc['exponent']:.3f}; cost per cart-second "
                   f"{', '.join(f'{1e3 * x:.2f} ms' for x in sc['cost_per_cart_s'])} (spread {100 * sc['spread']:.0f} %)")
+    if a.mix:
+        mix = scaling_fixed_mix(core, a.mix, a.mix_k, a.tol[0], a.settle, a.mix_window, a.repeat)
+        sc = scaling(mix)
+        out["mix"] = dict(layout=a.mix, tol=a.tol[0], results=mix, scaling=sc)
+        print(f"{a.mix} repeated {a.mix_k} times, tol {a.tol[0]:.0e}: CPU ~ carts^{sc['exponent']:.3f}; cost per "
+              f"cart-second {', '.join(f'{1e3 * x:.2f} ms' for x in sc['cost_per_cart_s'])} "
+              f"(spread {100 * sc['spread']:.0f} %)")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(out, f, indent=1)

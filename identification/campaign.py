@@ -78,7 +78,7 @@ def find_measurements(data_dir: Path) -> list[Path]:
 
 def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: int = 2,
                  scheduler: Optional[str] = None, max_evals: int = 5000, seed: int = 0,
-                 window: Optional[float] = None, settle: float = 3.0, free: Optional[tuple] = None,
+                 window: Optional[float] = None, settle: float = 4.0, free: Optional[tuple] = None,
                  progress: bool = True, client=None) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
     from lss_fmu.variables import CONTACT_MODELS
@@ -135,7 +135,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--max-evals", type=int, default=5000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of each record")
-    ap.add_argument("--settle", type=float, default=3.0, help="simulated settling before the trigger, s")
+    ap.add_argument("--settle", type=float, default=4.0, help="simulated settling before the trigger is armed, s")
     ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)

@@ -157,7 +157,7 @@ FROM_META = {"v_s": "drive.v_ref", "d": "chain.pretension", "mu_d": "wheel.mu_ro
 
 
 def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, window: Optional[float] = None,
-                     fixed: Optional[Mapping[str, object]] = None, settle: float = 3.0,
+                     fixed: Optional[Mapping[str, object]] = None, settle: float = 4.0,
                      tolerance: Optional[float] = None) -> IdentificationProblem:
     """The problem of one loaded measurement (lss_fmu.measurement.Measurement):
     bounds of the layout-dependent variables from its metadata, CoRs 0.2..0.9,

@@ -683,6 +683,14 @@ def plot_measurement(m: Measurement, path: Optional[Union[str, Path]] = None, ti
     axes[-1].set_xlabel("time since trigger [s]")
     top = axes[0].secondary_xaxis("top", functions=(lambda x: s_M + v * x, lambda s: (s - s_M) / v))
     if L:
+        # ticks at round track positions, lap by lap (the position wraps at L)
+        u0, u1 = s_M, s_M + v * t[-1]
+        step = next(st for st in (1, 2, 5, 10, 20, 25, 50, 100, 200, 250, 500, 1000)
+                    if (u1 - u0) / st <= 12)
+        ticks = [lap * L + k * step for lap in range(int(np.floor(u0 / L)), int(np.floor(u1 / L)) + 1)
+                 for k in range(int(np.ceil(L / step)))
+                 if u0 <= lap * L + k * step <= u1 and (k * step < L - 0.4 * step or k == 0)]
+        top.set_xticks(ticks)
         top.xaxis.set_major_formatter(FuncFormatter(lambda s, _: f"{s % L:.0f}"))
     top.set_xlabel(f"track position s [m] (s_M = {s_M:g} m, at the nominal {v:g} m/s)", fontsize=9)
     top.tick_params(labelsize=8)

@@ -106,3 +106,52 @@ def test_threads_under_tsan(workdir):
     assert "ThreadSanitizer" not in report, report[-4000:]
     assert res.returncode == 0, report[-4000:]
     assert "agree with one after another" in res.stdout
+
+
+# --- the layout fuzz target: corpus replay (and a short libFuzzer run with clang) -------------
+
+CORPUS = Path(__file__).parent / "c" / "corpus_layout"
+FUZZ_SRC = [Path(__file__).parent / "c" / "fuzz_layout.c", build.SRC / "layout_io.c", build.SRC / "track.c"]
+
+
+def test_layout_fuzz_corpus_replays_clean_under_asan(workdir):
+    """Every input the fuzzer kept (tests/c/corpus_layout, minimised) plus the
+    built-in layouts, through layout_parse and track_build, with the fuzz
+    target's checks, under ASan/UBSan with gcc: a regression test for the
+    fuzzing campaign that needs no libFuzzer."""
+    flags = ["-O1", "-fno-omit-frame-pointer", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
+    if not _sanitizer_works(flags, workdir):
+        pytest.skip("the compiler has no AddressSanitizer/UBSan runtime")
+    exe = workdir / "fuzz_replay"
+    cmd = [CC, "-std=c11", "-g", "-DFUZZ_REPLAY", "-D_DEFAULT_SOURCE", *flags, "-I", str(build.SRC),
+           "-o", str(exe), *map(str, FUZZ_SRC), "-lm"]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    res = subprocess.run([str(exe), str(CORPUS), str(build.SRC / "resources" / "layouts")], capture_output=True,
+                         text=True, timeout=600, env=dict(os.environ, ASAN_OPTIONS="detect_leaks=1"))
+    assert res.returncode == 0, (res.stdout + res.stderr)[-4000:]
+    n = int(re.search(r"replayed (\d+) inputs", res.stdout).group(1))
+    assert n >= len(list(CORPUS.iterdir())) + 9
+
+
+def test_layout_fuzzer_short_run(workdir, tmp_path):
+    """20 s of libFuzzer on the layout reader, seeded with the corpus (only
+    where clang with libFuzzer is installed; the campaign itself is recorded
+    in docs/robustness.md)."""
+    clang = shutil.which("clang")
+    if clang is None:
+        pytest.skip("clang (libFuzzer) not installed")
+    exe = workdir / "fuzz_layout"
+    cmd = [clang, "-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-fno-sanitize-recover=all",
+           "-I", str(build.SRC), "-o", str(exe), *map(str, FUZZ_SRC), "-lm"]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0 and "fuzzer" in res.stderr:
+        pytest.skip("clang without the libFuzzer runtime")
+    assert res.returncode == 0, res.stderr
+    work = tmp_path / "corpus"
+    work.mkdir()
+    res = subprocess.run([str(exe), "-max_total_time=20", "-timeout=10", "-rss_limit_mb=2048",
+                          f"-dict={CORPUS.parent / 'layout.dict'}", f"-artifact_prefix={tmp_path}/",
+                          str(work), str(CORPUS)], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr[-4000:]
+    assert "Done" in res.stderr
