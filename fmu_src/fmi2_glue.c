@@ -614,6 +614,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 typedef struct {
     unsigned long long magic;
     int version;
+    char guid[40];          /* the build that wrote it: a state is only valid for the same binary */
     int state;
     int has_chain;
     int has_out;            /* out holds the outputs at this state */
@@ -635,6 +636,10 @@ typedef struct {
 static int is_snapshot(const void *s) {
     const SnapHeader *h = s;
     return h->magic == SNAP_MAGIC && h->version == SNAP_VERSION;
+}
+
+static int same_build(const SnapHeader *h) {
+    return memchr(h->guid, 0, sizeof h->guid) && strcmp(h->guid, LSS_GUID) == 0;
 }
 
 /* Do two parameter sets give chains of the same structure (all fixed
@@ -671,6 +676,10 @@ static int check_header(const SnapHeader *h, char *why, size_t len) {
     char err[512];
     if (!is_snapshot(h)) {
         snprintf(why, len, "not an LSSChain FMU state of this version");
+        return 1;
+    }
+    if (!same_build(h)) {
+        snprintf(why, len, "the FMU state was written by another build of LSSChain (GUID differs)");
         return 1;
     }
     if (!valid_state(h->state) || (h->has_chain != 0 && h->has_chain != 1) ||
@@ -727,6 +736,8 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     }
     s->h.magic = SNAP_MAGIC;
     s->h.version = SNAP_VERSION;
+    memset(s->h.guid, 0, sizeof s->h.guid);
+    snprintf(s->h.guid, sizeof s->h.guid, "%s", LSS_GUID);
     s->h.state = in->state;
     s->h.has_chain = has;
     s->h.has_out = has;

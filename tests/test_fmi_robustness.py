@@ -465,14 +465,21 @@ def corrupt_variants(blob: bytes):
     yield blob[:-1]
     yield blob + b"\0"
     yield blob[: len(blob) // 2]
+    # the header (fmi2_glue.c, SnapHeader on x86-64): magic 0, version 8, guid 12..51,
+    # state 52, has_chain 56, has_out 60, tolerance_defined 64, stop_time_defined 68,
+    # tolerance 72, start_time 80, time 88, stop_time 96, n 104, then the parameters
     yield b"\xff" + blob[1:]                      # magic
     yield blob[:8] + b"\x09" + blob[9:]           # version
-    for at in (12, 16, 20, 24, 28):               # state, flags
+    yield blob[:14] + b"X" + blob[15:]            # another build's GUID
+    yield blob[:12] + b"Y" * 40 + blob[52:]       # an unterminated GUID
+    for at in (52, 56, 60, 64, 68):               # state, flags
         for byte in (0x00, 0x02, 0x7F, 0xFF):
             yield blob[:at] + bytes([byte]) + blob[at + 1:]
-    for at in (32, 40, 48, 56, 64):               # tolerance, times, n
+    for at in (72, 80, 88, 96, 104):              # tolerance, times, n
         yield blob[:at] + b"\xff" * 8 + blob[at + 8:]
         yield blob[:at] + b"\x00\x00\x00\x00\x00\x00\xf8\x7f" + blob[at + 8:]  # NaN
+    for at in range(112, min(len(blob), 112 + 4096 * 2), 509):  # parameters (strings, numbers)
+        yield blob[:at] + b"\xff\xff" + blob[at + 2:]
 
 
 def test_corrupted_serialized_states_are_refused_or_harmless():
@@ -495,6 +502,12 @@ def test_corrupted_serialized_states_are_refused_or_harmless():
             record("corrupted serialized FMU state", s, status, n, (OK, ERROR, DISCARD), need_message=False)
             if status == ERROR:
                 assert s.last_error()
+        # the offsets above are right: a GUID of another build is named as such
+        bad = blob[:14] + b"X" + blob[15:]
+        state = c_void_p()
+        buf = ctypes.create_string_buffer(bad, len(bad))
+        assert raw(s, "fmi2DeSerializeFMUstate", buf, len(bad), byref(state))[0] == ERROR
+        assert "another build" in s.last_error()
 
 
 # --- random layout files through the FMU --------------------------------------------------------

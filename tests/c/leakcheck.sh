@@ -5,7 +5,7 @@
 # FMU states, under valgrind (default) or LeakSanitizer, and prints the
 # figures (bytes lost) that docs/robustness.md quotes.
 #
-#   tests/c/leakcheck.sh [valgrind|lsan] [CYCLES]
+#   [CORRUPT=R] tests/c/leakcheck.sh [valgrind|lsan] [CYCLES]   (R corrupted FMU states, default 300)
 #
 # Run from anywhere; needs gcc, the project's .venv (for fmpy's FMI headers)
 # and a built build/gen (make fmu).
@@ -21,7 +21,7 @@ URI=$("$PY" -c "import pathlib; print(pathlib.Path('fmu_src/resources').resolve(
 SRCS=$(ls fmu_src/*.c | grep -v '/test_')
 OUT=$(mktemp -d)
 trap 'rm -rf "$OUT"' EXIT
-ARGS=("$URI" --cycles "$CYCLES" --stop 0.0001 --step 0.0001 --threads 4 --corrupt 300)
+ARGS=("$URI" --cycles "$CYCLES" --stop 0.0001 --step 0.0001 --threads 4 --corrupt "${CORRUPT:-300}")
 case "$MODE" in
 valgrind)
     command -v valgrind >/dev/null || { echo "valgrind not installed (try: $0 lsan)"; exit 2; }
