@@ -675,7 +675,7 @@ def plot_measurement(m: Measurement, path: Optional[Union[str, Path]] = None, ti
     for ax, c in zip(axes, FORCE_CHANNELS):
         for a, b, col in spans:
             ax.axvspan(a, b, color=col, lw=0, zorder=0)
-        ax.plot(t, m.samples[c].to_numpy(), lw=0.6, color="C0")
+        ax.plot(t, m.samples[c].to_numpy(), lw=0.6, color="C0", rasterized=True)  # small SVGs
         ax.set_ylabel(c.replace("transducer.", "").replace(".", "\n", 1) + " [N]", fontsize=8)
         ax.tick_params(labelsize=8)
         ax.grid(alpha=0.3, lw=0.5)

@@ -93,7 +93,7 @@ TEST_PLAN = {
 # straights over one lap at 2 m/s is about 900 N (docs/measurements.md,
 # `calibrate_pretension`).
 NOMINAL_PRETENSION = {
-    "layout1": 0.035, "layout2": 0.035, "layout3": 0.090, "layout4": 0.031,
+    "layout1": 0.035, "layout2": 0.045, "layout3": 0.072, "layout4": 0.031,
     "layout5": 0.022, "layout6": 0.025, "layout7": 0.023, "demo": 0.015, "oval": 0.012,
 }
 
@@ -483,16 +483,29 @@ def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite):
                 "traceback": traceback.format_exc()}
 
 
-def _existing(out: Path, number: int, set_name: str, seed: int) -> Optional[bool]:
-    """None: not there; True: there and from this set and seed; False: there but different."""
+def _existing(out: Path, number: int, set_name: str, seed: int, sha: str) -> Optional[str]:
+    """None if measurement `number` is not in `out`; "" if it is there and is what
+    this run would make (same set, seed, FMU, parameters, full lap); otherwise
+    the reason why it differs."""
     folder, truth = out / folder_name(number), answers_dir(out) / folder_name(number) / "truth.json"
     if not (folder / M.META_FILE).is_file() or not truth.is_file():
         return None
     try:
         t = json.loads(truth.read_text())
-        return t.get("set") == set_name and t.get("seed") == seed and t.get("full_lap", False)
-    except Exception:
-        return False
+    except Exception as exc:
+        return f"its answer file cannot be read ({exc})"
+    if t.get("set") != set_name or t.get("seed") != seed:
+        return f"it is from set '{t.get('set')}', seed {t.get('seed')}"
+    if not t.get("full_lap", False):
+        return "it is a shortened run (--lap-seconds)"
+    if t.get("fmu_sha256") != sha:
+        return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
+    want = {k: v for k, v in make_case(set_name, number, seed).fmu_params.items() if k != "layout.name"}
+    have = {k: v for k, v in t.get("fmu_parameters", {}).items() if k != "layout.name"}
+    if want != have:
+        diff = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
+        return f"its parameters differ from what this version of the rig draws ({', '.join(diff)})"
+    return ""
 
 
 def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequence[int]] = None,
@@ -501,10 +514,14 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
                  log=print) -> list:
     """Generate measurements of a set into `out`, in parallel.
 
-    Existing measurements of the same set and seed are kept (so an interrupted
-    run resumes); with overwrite=True they are made again. The FMU is copied
-    into out/fmu/ first, so a rebuild during the run changes nothing. Returns
-    one result dict per measurement (with 'error' for a failed one)."""
+    Measurements already in `out` that this run would make identically (same
+    set, seed, FMU and parameters, full lap) are kept, so an interrupted run
+    resumes; with overwrite=True they are made again. A set folder holds one
+    FMU: if any measurement in `out` differs (other FMU, seed, parameters or a
+    shortened run), the run stops with the reason unless overwrite=True, and
+    then every such measurement is made again too. The FMU is copied into
+    out/fmu/ first, so a rebuild during the run changes nothing. Returns one
+    result dict per measurement (with 'error' for a failed one)."""
     from tqdm import tqdm
 
     from .runner import fmu_path
@@ -526,15 +543,23 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
         "Ground truth of the synthetic measurements in the parent folder.\n"
         "Identification must never read anything in this folder; it is for evaluating results.\n")
     todo, results = [], []
-    for n in numbers:
-        state = _existing(out, n, set_name, seed)
-        if state is True and not overwrite and lap_seconds is None:
+    stale = {}
+    for n in ALL_NUMBERS:
+        state = _existing(out, n, set_name, seed, sha)
+        if state:
+            stale[n] = state
+        if n not in numbers:
+            continue
+        if state == "" and not overwrite and lap_seconds is None:
             results.append({"number": n, "layout": NUMBERING[n], "skipped": "already generated"})
             continue
-        if state is False and not overwrite:
-            raise FileExistsError(f"{out / folder_name(n)} holds a different measurement (other set, seed or "
-                                  f"a shortened run); use overwrite to replace it")
         todo.append(n)
+    if stale and not overwrite:
+        lines = "; ".join(f"{folder_name(n)}: {why}" for n, why in sorted(stale.items()))
+        raise FileExistsError(f"{out} holds measurements that this run would not make the same way ({lines}). "
+                              f"Use overwrite (--overwrite) to make them again, another folder, or --fmu with "
+                              f"the FMU in {fdir} that made them")
+    todo = sorted(set(todo) | set(stale))
     # longest first: better balance over the workers
     cases = {n: make_case(set_name, n, seed, None, lap_seconds) for n in todo}
     todo.sort(key=lambda n: -cases[n].cost)

@@ -130,8 +130,21 @@ def test_small_recovery_run_is_loadable(tmp_path, capsys):
     assert np.all(lo < x) and np.all(x < hi)
     assert json.loads((out / "set.json").read_text())["measurements"]["m20"]["n_samples"] == 450
     # a partial run is not silently kept as a finished measurement
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError, match="m20: it is a shortened run"):
         rig.generate_set("recovery", out, [20], workers=1, progress=False, log=lambda *_: None)
+    # nor is a measurement made with another FMU or other parameters mixed into a set
+    tfile = out / "answers" / "m20" / "truth.json"
+    t = json.loads(tfile.read_text())
+    sha = t["fmu_sha256"]
+    assert rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha) == "it is a shortened run (--lap-seconds)"
+    t["full_lap"] = True
+    tfile.write_text(json.dumps(t))
+    assert rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha) == ""
+    assert "another FMU" in rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, "0" * 64)
+    assert "seed 20120901" in rig._existing(out, 20, "recovery", 1, sha)
+    t["fmu_parameters"]["chain.pretension"] *= 1.1
+    tfile.write_text(json.dumps(t))
+    assert "chain.pretension" in rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha)
 
 
 def test_small_field_run(tmp_path):
