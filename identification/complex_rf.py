@@ -191,7 +191,6 @@ class _Recorder:
         self.best_x: np.ndarray | None = None
         self.best_f = math.inf
         self.n_bad = 0
-        self.nrounds = 0
         self.bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -390,7 +389,7 @@ def intermediate(rec: _Recorder, nit: int, F: np.ndarray):
     from scipy.optimize import OptimizeResult
 
     return OptimizeResult(x=rec.best_x.copy(), fun=rec.best_f, nit=nit, nfev=rec.nfev,
-                          complex_f=F.copy())
+                          nfev_used=rec.nfev_used, complex_f=F.copy())
 
 
 # --------------------------------------------------------------------------
@@ -438,7 +437,7 @@ def minimize_complex(
         times its bound range.
     seed : int, ``None`` or :class:`numpy.random.Generator`; same seed, same run.
     callback : ``callback(intermediate_result)`` after every iteration, with an
-        :class:`scipy.optimize.OptimizeResult` (x, fun, nit, nfev, complex_f);
+        :class:`scipy.optimize.OptimizeResult` (x, fun, nit, nfev, nfev_used, complex_f);
         returning ``True`` stops the run (status 3).
     progress : show a tqdm progress bar with the best objective.
     retract_decay, max_retractions : retraction schedule (4, 30).

@@ -173,7 +173,20 @@ class _Evaluator:
                                 "error": err}
                         self.log.write(json.dumps(line) + "\n")
                 self.log.flush()
-        return [(float(f), bool(bad), err) for f, bad, err in outs], replayed
+        return [_normalize(o) for o in outs], replayed
+
+
+def _normalize(out: Any) -> tuple[float, bool, str | None]:
+    """A result from the map: the ``SafeObjective`` triple, or - from a ``map_fn``
+    that calls the objective itself - a plain value (non-finite -> bad point)."""
+    if isinstance(out, tuple) and len(out) == 3:
+        f, bad, err = out
+        return float(f), bool(bad), err
+    try:
+        v = float(np.asarray(out, dtype=float).reshape(()))
+    except (TypeError, ValueError) as exc:
+        return math.inf, True, f"map returned {out!r}: {exc}"[:500]
+    return (v, False, None) if math.isfinite(v) else (math.inf, True, None)
 
 
 def _cpu_count() -> int:
@@ -374,9 +387,12 @@ def minimize_complex_parallel(
     executor : a :class:`concurrent.futures.Executor`; batches go through
         ``executor.map``. With a process pool ``fun`` and ``args`` must be picklable.
     map_fn : instead of ``executor``: ``map_fn(fn, xs)`` returning the results in
-        order, e.g. ``dask_map(client)``. With neither, the batch is evaluated in
+        order, e.g. ``dask_map(client)``; it should apply ``fn`` (the wrapped
+        objective), but plain objective values are accepted too. With neither, the batch is evaluated in
         this process, one point after the other (same run, no speed-up).
 
+    callback : as in the serial optimiser, after every iteration (speculative) or
+        every round (multidirection).
     eval_log : path of an append-only log (JSON lines) of every evaluation, written
         as each batch returns.
     replay : recorded evaluations to reuse instead of calling ``fun`` - an

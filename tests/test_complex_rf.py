@@ -328,7 +328,7 @@ def test_multidirection_finds_optima():
                                                strategy="multidirection"), b5, SHIFT[:5]) for s in range(5))
     hits = [found(minimize_complex_parallel(rosenbrock, b2, seed=s, n_parallel=4, strategy="multidirection"),
                   b2, np.ones(2)) for s in range(10)]
-    assert np.mean(hits) >= 0.6  # measured 87 % over 30 seeds (serial: 92 %)
+    assert np.mean(hits) >= 0.6  # measured 87 % over seeds 0-29 (serial: 100 %)
 
 
 class CountingRosenbrock:
@@ -370,3 +370,19 @@ def test_interrupted_run_resumes_from_its_evaluation_log_without_losing_evaluati
     third = CountingRosenbrock()
     again = minimize_complex_parallel(third, bounds, seed=4, n_parallel=1, max_evals=800, replay=serial)
     assert third.calls == 0 and again.nrounds == 0 and np.array_equal(again.x, serial.x)
+
+
+def test_map_fn_may_return_plain_objective_values():
+    def plain_map(fn, xs):  # calls the objective itself, NaN for a failed point
+        out = []
+        for x in xs:
+            try:
+                out.append(flaky_sphere(np.asarray(x)))
+            except RuntimeError:
+                out.append(float("nan"))
+        return out
+
+    bounds = [(-1.0, 1.0)] * 3
+    res = minimize_complex_parallel(flaky_sphere, bounds, seed=3, n_parallel=3, map_fn=plain_map)
+    ref = minimize_complex_parallel(flaky_sphere, bounds, seed=3, n_parallel=3)
+    assert np.array_equal(res.history.x, ref.history.x) and res.n_bad == ref.n_bad > 0
