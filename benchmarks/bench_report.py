@@ -58,6 +58,21 @@ def scaling_table(before, after) -> list[str]:
     return rows
 
 
+def mix_table(before, after) -> list[str]:
+    rows = ["| version | layout | carts | cart-s per CPU-s | steps/s | ns per cart and rhs | CPU per cart-second, ms |",
+            "|---|---|---|---|---|---|---|"]
+    for label, data in (("before", before), ("after", after)):
+        mix = (data or {}).get("mix")
+        if not mix:
+            continue
+        for r in mix["results"]:
+            rows.append(f"| {label} | {r['layout']} | {r['carts']} | {r['throughput']:.0f} | {r['steps_per_s']:.0f} | "
+                        f"{r['ns_per_cart_rhs']:.0f} | {1e3 * r['cpu'] / r['window'] / r['carts']:.2f} |")
+        sc = mix["scaling"]
+        rows.append(f"| {label} | exponent b | | | | | {sc['exponent']:.3f} (spread {pct(sc['spread'])}) |")
+    return rows
+
+
 def fmpy_table(before, after) -> list[str]:
     rows = ["| version | fmpy run, CPU s | C master loop, CPU s | difference | master loop alone, us/point "
             "(runner / fmpy wrappers) | core work, us/point | loop overhead | layout-7 lap CPU s | "
@@ -93,6 +108,10 @@ def tables() -> str:
         m = (at or bt)["machine"]
         out += [f"Machine: {m}", "", "### Throughput and accuracy", ""] + throughput_table(bt, at)
         out += ["", "### Scaling with the number of carts", ""] + scaling_table(bt, at)
+    bx, ax = load("before_mix"), load("after_mix")
+    if bx or ax:
+        out += ["", "### Scaling at a fixed track mix (layout 7 repeated k times, pretension k x 0.01 m)", ""]
+        out += mix_table(bx, ax)
     bf, af = load("before_fmpy"), load("after_fmpy")
     if bf or af:
         out += ["", "### fmpy at 300 Hz against the C core, and identification speed", ""] + fmpy_table(bf, af)

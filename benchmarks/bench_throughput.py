@@ -172,12 +172,17 @@ def repeated_layout(name: str, k: int, out_dir) -> str:
 def scaling_fixed_mix(core: Core, name: str, ks, tol: float, settle: float, window: float, repeat: int) -> list:
     """Throughput of `name` repeated k times: cost against carts at a fixed
     mix of track elements (the built-in layouts differ in their share of
-    curves, which costs more per cart than straight track)."""
+    curves, which costs more per cart than straight track). The pretension
+    (the chain's total stretch) grows with k, so that every joint carries the
+    same preload as in the single lap: the same physics per cart."""
     import tempfile
+    from lss_fmu.variables import BY_NAME
+    d0 = float(BY_NAME["chain.pretension"].start)
     out = []
     with tempfile.TemporaryDirectory() as d:
         for k in ks:
-            r = measure(core, repeated_layout(name, k, d), tol, settle, window, 0.5, accuracy=False, repeat=repeat)
+            r = measure(core, repeated_layout(name, k, d), tol, settle, window, 0.5,
+                        params={"chain.pretension": d0 * k}, accuracy=False, repeat=repeat)
             r["layout"] = f"{name}x{k}"
             print(fmt(r), flush=True)
             out.append(r)
