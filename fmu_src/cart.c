@@ -44,7 +44,7 @@ double cart_kinematics(Chain *c, const double *y, int i, CartLocal *L) {
     cs->v_t = vt;
     m3_mulv(cs->t, b->R, tl);
 
-    v3_set(cs->F, 0.0, 0.0, -m->g.mass * m->gravity);
+    v3_set(cs->F, 0.0, 0.0, -m->mass[i] * m->gravity);
     v3_set(cs->T, 0.0, 0.0, 0.0);
     return vt;
 }
@@ -55,7 +55,7 @@ void cart_derivatives(const Chain *c, const double *y, int i, double *dy) {
     const double *yi = y + CART_NY * i;
     double *d = dy + CART_NY * i;
     const double *q = yi + 3, *v = yi + 7, *w = yi + 10;
-    const double *I = m->g.inertia;
+    const double *I = m->inertia + 3 * i;
     d[0] = v[0]; d[1] = v[1]; d[2] = v[2];
     /* q' = q (x) (0, w) / 2 */
     d[3] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2]);
@@ -63,7 +63,7 @@ void cart_derivatives(const Chain *c, const double *y, int i, double *dy) {
     d[5] = 0.5 * (q[0] * w[1] + q[3] * w[0] - q[1] * w[2]);
     d[6] = 0.5 * (q[0] * w[2] + q[1] * w[1] - q[2] * w[0]);
     const double *F = cs->F;
-    double im = 1.0 / m->g.mass;
+    double im = 1.0 / m->mass[i];
     d[7] = F[0] * im; d[8] = F[1] * im; d[9] = F[2] * im;
     double tb[3], Iw[3], gyro[3];
     m3_tmulv(tb, cs->R, cs->T);

@@ -56,7 +56,7 @@ int chain_check_params(const LSSParams *p, char *err, size_t errlen) {
     if (!(p->solver_h_max >= 1e-6 && p->solver_h_max <= 1.0))
         return bad(err, errlen, "solver.h_max", p->solver_h_max,
                    "must lie in [1e-6, 1] s (a smaller step would stall the solver)");
-    return 0;
+    return effects_check_params(p, err, errlen);
 }
 
 static int is_path(const char *name) {
@@ -116,6 +116,8 @@ static int allocate(Chain *c) {
     c->dy_scratch = xcalloc(c, ny, sizeof(double), &fail);
     c->m.err_scale = xcalloc(c, ny, sizeof(double), &fail);
     c->m.err_rel = xcalloc(c, ny, sizeof(double), &fail);
+    c->m.mass = xcalloc(c, N, sizeof(double), &fail);
+    c->m.inertia = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
     return fail;
 }
 
@@ -125,7 +127,8 @@ void chain_free(Chain *c) {
     void *ptrs[] = {c->st.y, c->st.s_hint, c->st.v_onset, c->st.delta_prev, c->st.ddelta_prev,
                     c->sc.delta, c->sc.ddelta, c->sc.force, c->sc.cart,
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
-                    c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel};
+                    c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel,
+                    c->m.mass, c->m.inertia};
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
         if (ptrs[i]) a.free(ptrs[i]);
     track_free(&c->m.track, &a);
@@ -146,6 +149,9 @@ static void error_scales(ChainModel *m) {
     double *s = m->err_scale + CART_NY * m->n_carts, *r = m->err_rel + CART_NY * m->n_carts;
     s[G_INT] = 1e-2; r[G_INT] = 1;
     for (int k = 1; k < N_GLOBAL; k++) { s[k] = 1e6; r[k] = 1; }  /* bookkeeping only */
+    /* the rolled distances set the phase of an out-of-round wheel: positions */
+    s[G_ROLL_L] = s[G_ROLL_R] = 1e-2;
+    r[G_ROLL_L] = r[G_ROLL_R] = 0;
 }
 
 Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc *a,
@@ -215,6 +221,13 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
         goto fail;
     }
     error_scales(m);
+    if (effects_init(&m->fx, p, m->n_carts, m->transducer, m->g.r_drive, m->track.length, err, errlen)) goto fail;
+    for (int i = 0; i < m->n_carts; i++) {
+        /* factor 1 (every effect off) keeps the cart's mass and inertia bit for bit */
+        double f = effects_mass_factor(p, i, m->transducer);
+        m->mass[i] = m->g.mass * f;
+        for (int k = 0; k < 3; k++) m->inertia[3 * i + k] = m->g.inertia[k] * f;
+    }
     chain_set_inputs(c, p);
     double v0 = p->chain_v_init >= 0 ? p->chain_v_init : p->drive_v_ref;
     if (chain_initial_state(c, v0, err, errlen)) goto fail;

@@ -5,7 +5,9 @@
  * State vector y: per cart i, at 13*i: r[3] (CG, world), q[4] (orientation
  * quaternion w,x,y,z, body->world), v[3] (world), w[3] (body angular rate);
  * then the globals at 13*N: PI integrator, motor work, damping loss,
- * rolling loss. Body frame: x forward, y left, z up, origin at the CG.
+ * rolling loss, and the distances rolled by the out-of-round wheels (left,
+ * right; constant 0 when that effect is off). Body frame: x forward, y left,
+ * z up, origin at the CG.
  * Cart i+1 runs ahead of cart i; cart i's front joint meets cart i+1's rear
  * joint, and cart N-1's front joint meets cart 0's rear joint. */
 #ifndef LSS_CHAIN_H
@@ -15,6 +17,7 @@
 
 #include "contact.h"
 #include "dopri5.h"
+#include "effects.h"
 #include "lss_alloc.h"
 #include "lss_vars.h"
 #include "track.h"
@@ -25,7 +28,9 @@
 #define G_WMOT 1    /* motor work, J */
 #define G_WDAMP 2   /* hysteresis loss, J */
 #define G_WROLL 3   /* rolling loss, J */
-#define N_GLOBAL 4
+#define G_ROLL_L 4  /* distance rolled by the out-of-round left driving wheel, m */
+#define G_ROLL_R 5  /* the same, right */
+#define N_GLOBAL 6
 
 enum { CC_JA = 0, CC_JR, CC_SW, CC_RW, CC_N };          /* contact classes */
 enum { W_SL = 0, W_SR, W_DL, W_DR, N_WHEEL };          /* wheels of one cart */
@@ -69,6 +74,9 @@ typedef struct ChainModel {
     int law_code;
     double v_min, mu_roll, F_max, motor_length, pretension, preload, gravity;
     double tol, h_max;
+    Effects fx;                       /* the effects catalogue (effects.h) */
+    double *mass;                     /* [N] mass of each cart, kg (g.mass unless the masses differ) */
+    double *inertia;                  /* [3N] its principal moments, kg m^2 */
     double *err_scale;                /* per state: absolute scale of the error norm */
     double *err_rel;                  /* per state: 1 if the error is also relative to |y| */
 } ChainModel;
@@ -97,6 +105,9 @@ typedef struct {
     double *delta, *ddelta;           /* [N_SLOT*N] indentation and its rate */
     double *force;                    /* [N_SLOT*N] contact force magnitude */
     double jointF[3];                 /* front-joint force on the transducer cart, its body frame */
+    double joint_v_axial;             /* closing rate of the transducer's front joint, m/s */
+    double oor_x[2];                  /* distance rolled by the out-of-round wheels (from y), m */
+    double oor_rate[2];               /* its rate: their tangential speed, m/s */
     double v_mean, F_cmd, F_total, P_total;
     long n_rhs;
 } ChainScratch;

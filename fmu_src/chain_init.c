@@ -7,7 +7,9 @@
  * shorter by d/N each (d the pretension), which stretches every joint by d/N
  * and preloads it. Every cart starts at the chain speed with the track's turn
  * rate, and the integrator of the speed controller starts at the thrust that
- * balances the rolling resistance, so that the start transient is short. */
+ * balances the rolling (and running, effects.c) resistance, so that the start
+ * transient is short. Carts of other masses (effects.mass.*) are assembled at
+ * the nominal wheel deflection and settle in the first tenths of a second. */
 #include <stdio.h>
 #include <string.h>
 
@@ -197,8 +199,16 @@ int chain_initial_state(Chain *c, double v0, char *err, size_t errlen) {
     a->free(s); a->free(R); a->free(J);
     double *gl = st->y + CART_NY * N;
     memset(gl, 0, sizeof(double) * N_GLOBAL);
-    if (st->Ki > 0 && m->track.n_motors > 0)
-        gl[G_INT] = m->mu_roll * g->mass * m->gravity * N / (m->track.n_motors * st->Ki);
+    if (st->Ki > 0 && m->track.n_motors > 0) {
+        double F = m->mu_roll * g->mass * m->gravity * N;
+        if (m->fx.mass_on) {
+            double M = 0.0;
+            for (int i = 0; i < N; i++) M += m->mass[i];
+            F = m->mu_roll * M * m->gravity;
+        }
+        if (m->fx.resist_on) F += N * (m->fx.c1 * v0 + m->fx.c2 * v0 * fabs(v0));  /* running resistance too */
+        gl[G_INT] = F / (m->track.n_motors * st->Ki);
+    }
     m->preload = m->law[CC_JA].K * contact_pow(fabs(m->pretension) / N, m->law[CC_JA].n);
     return 0;
 }

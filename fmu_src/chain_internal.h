@@ -36,6 +36,8 @@ void wheel_forces(Chain *c, int i, const CartLocal *L, double *p_damp, double *p
 /* The joint between cart j's front and cart j+1's rear. */
 void joint_forces(Chain *c, const double *y, int j, double *p_damp);
 void drive_forces(Chain *c, const double *y, int i, double F_cmd);
+/* Velocity-dependent running resistance of cart i (effects.c). */
+void effects_resistance(Chain *c, int i, double *p_roll);
 /* Newton-Euler: writes the derivatives of cart i. */
 void cart_derivatives(const Chain *c, const double *y, int i, double *dy);
 

@@ -1,17 +1,17 @@
-/* The outputs: the transducer cart's eleven signals, the chain and drive
+/* The outputs: the transducer cart's signals (its force sensors with their
+ * gain and offset errors, effects.c), the chain and drive
  * quantities, the energy bookkeeping and the solver statistics. */
 #include "chain_internal.h"
 
 static double mechanical_energy(const Chain *c) {
     const ChainModel *m = &c->m;
     const ChainScratch *sc = &c->sc;
-    const double *I = m->g.inertia;
     double E = 0.0;
     for (int i = 0; i < m->n_carts; i++) {
-        const double *yi = c->st.y + CART_NY * i, *v = yi + 7, *w = yi + 10;
-        E += 0.5 * m->g.mass * v3_dot(v, v);
+        const double *yi = c->st.y + CART_NY * i, *v = yi + 7, *w = yi + 10, *I = m->inertia + 3 * i;
+        E += 0.5 * m->mass[i] * v3_dot(v, v);
         E += 0.5 * (I[0] * w[0] * w[0] + I[1] * w[1] * w[1] + I[2] * w[2] * w[2]);
-        E += m->g.mass * m->gravity * yi[2];
+        E += m->mass[i] * m->gravity * yi[2];
         const double *d = sc->delta + N_SLOT * i;
         E += contact_energy(&m->law[CC_JA], d[SLOT_JA]) + contact_energy(&m->law[CC_JR], d[SLOT_JR]);
         for (int k = 0; k < N_WHEEL; k++)
@@ -41,6 +41,9 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->transducer_wheel_w_dl = ws[W_DL];
     o->transducer_wheel_w_dr = ws[W_DR];
     o->transducer_s = sc->cart[tr].s;
+    if (m->fx.sensor_on) effects_sensor(&m->fx, o);
+    o->transducer_v = sc->cart[tr].v_t;
+    o->transducer_joint_v_axial = sc->joint_v_axial;
     o->chain_v_mean = sc->v_mean;
     o->drive_F_total = sc->F_total;
     o->drive_P_total = sc->P_total;
@@ -60,4 +63,5 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->chain_pitch = m->g.pitch;
     o->chain_preload = m->preload;
     o->drive_n_motors = m->track.n_motors;
+    o->cart_r_drive = m->g.r_drive;
 }

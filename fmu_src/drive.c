@@ -1,6 +1,9 @@
 /* Linear motors on the straights and the saturated PI speed controller.
  * A motor pushes the reaction plate under a cart in proportion to how much of
- * the motor the plate covers, so thrust is continuous in the cart position. */
+ * the motor the plate covers, so thrust is continuous in the cart position.
+ * With effects.motor_ripple each motor adds a cogging force that depends on
+ * the plate's position over it, A w sin(2 pi x / p + phi), whatever the
+ * controller asks; its work is motor work like the thrust's. */
 #include <math.h>
 
 #include "chain_internal.h"
@@ -10,30 +13,60 @@ static double overlap(double a0, double a1, double b0, double b1) {
     return hi > lo ? hi - lo : 0.0;
 }
 
+#if defined(__GNUC__)
+#define DRIVE_INLINE inline __attribute__((always_inline))
+#define DRIVE_NOINLINE __attribute__((noinline))
+#else
+#define DRIVE_INLINE inline
+#define DRIVE_NOINLINE
+#endif
+
 /* Sum over the motors that overlap the plate centred at s_plate of
  * overlap / motor length. lo is the first motor starting after s_plate
  * (0..n); motor k < 0 or k >= n stands for motor k mod n a lap earlier or
  * later, so the loop closes without wrapping arc lengths. The motors are
- * sorted by their start; a motor is at most motor_length long. */
-static double overlap_from(const ChainModel *m, double s_plate, int lo) {
+ * sorted by their start; a motor is at most motor_length long.
+ * With the constant with_ripple, *ripple also receives the sum of
+ * w sin(2 pi x / p + phi), x the plate centre from the motor start; without
+ * it the loop is the plain one. */
+static DRIVE_INLINE double overlap_sum(const ChainModel *m, double s_plate, int lo, const int with_ripple,
+                                       double *ripple) {
     const Track *t = &m->track;
-    double half = 0.5 * m->g.plate_length, L = t->length, frac = 0.0;
+    double half = 0.5 * m->g.plate_length, L = t->length, frac = 0.0, rs = 0.0;
     int nm = t->n_motors;
     /* forwards: motors starting before the plate's end */
     for (int k = lo; k < lo + nm; k++) {
         int kk = k >= nm ? k - nm : k;
         double shift = k >= nm ? L : 0.0, s0 = t->motor_s0[kk] + shift, s1 = t->motor_s1[kk] + shift;
         if (s0 >= s_plate + half) break;
-        if (s1 > s0) frac += overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+        if (s1 > s0) {
+            double w = overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+            frac += w;
+            if (with_ripple && w > 0.0) rs += w * sin(m->fx.ripple_k * (s_plate - s0) + m->fx.ripple_phase);
+        }
     }
     /* backwards: motors ending after the plate's start */
     for (int k = lo - 1; k >= lo - nm; k--) {
         int kk = k < 0 ? k + nm : k;
         double shift = k < 0 ? -L : 0.0, s0 = t->motor_s0[kk] + shift, s1 = t->motor_s1[kk] + shift;
         if (s0 + m->motor_length <= s_plate - half) break;
-        if (s1 > s0) frac += overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+        if (s1 > s0) {
+            double w = overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+            frac += w;
+            if (with_ripple && w > 0.0) rs += w * sin(m->fx.ripple_k * (s_plate - s0) + m->fx.ripple_phase);
+        }
     }
+    if (with_ripple) *ripple = rs;
     return frac;
+}
+
+static double overlap_from(const ChainModel *m, double s_plate, int lo) {
+    return overlap_sum(m, s_plate, lo, 0, NULL);
+}
+
+/* out of line: the plain thrust path stays as lean as without the ripple */
+static DRIVE_NOINLINE double overlap_ripple_from(const ChainModel *m, double s_plate, int lo, double *ripple) {
+    return overlap_sum(m, s_plate, lo, 1, ripple);
 }
 
 double drive_overlap(const ChainModel *m, double s_plate) {
@@ -49,16 +82,16 @@ double drive_overlap(const ChainModel *m, double s_plate) {
     return overlap_from(m, s_plate, lo);
 }
 
-/* The same with the index found by walking from a hint (a cart moves little
- * between evaluations), which is updated. */
-static double drive_overlap_hint(const ChainModel *m, double s_plate, int *hint) {
+/* The first motor starting after s_plate, found by walking from a hint (a
+ * cart moves little between evaluations), which is updated. */
+static int motor_from_hint(const ChainModel *m, double s_plate, int *hint) {
     const Track *t = &m->track;
     int nm = t->n_motors, lo = *hint;
     if (lo < 0 || lo > nm) lo = 0;
     while (lo > 0 && t->motor_s0[lo - 1] > s_plate) lo--;
     while (lo < nm && t->motor_s0[lo] <= s_plate) lo++;
     *hint = lo;
-    return overlap_from(m, s_plate, lo);
+    return lo;
 }
 
 double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot) {
@@ -81,9 +114,18 @@ void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     const ChainModel *m = &c->m;
     ChainScratch *sc = &c->sc;
     CartScratch *cs = &sc->cart[i];
-    if (m->track.n_motors == 0 || F_cmd == 0.0) return;
-    double s_plate = cs->s - (m->g.x_axle - m->g.x_motor);
-    double frac = drive_overlap_hint(m, s_plate, &cs->motor);
+    int rip = m->fx.ripple_on;
+    if (m->track.n_motors == 0 || (F_cmd == 0.0 && !rip)) return;
+    double s_plate = cs->s - (m->g.x_axle - m->g.x_motor), frac, F;
+    int lo = motor_from_hint(m, s_plate, &cs->motor);
+    if (!rip) {
+        frac = overlap_from(m, s_plate, lo);
+        F = F_cmd * frac;
+    } else {
+        double rsum;
+        frac = overlap_ripple_from(m, s_plate, lo, &rsum);
+        F = F_cmd * frac + m->fx.ripple_A * rsum;
+    }
     if (frac <= 0) return;
     const double *yi = y + CART_NY * i;
     const double *R = cs->R, *ww = cs->ww;
@@ -91,10 +133,10 @@ void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     m3_mulv(rm, R, bm);
     v3_cross(v, ww, rm);
     v3_add(v, v, yi + 7);
-    v3_scale(fv, cs->t, F_cmd * frac);
+    v3_scale(fv, cs->t, F);
     v3_add(cs->F, cs->F, fv);
     v3_cross(tmp, rm, fv);
     v3_add(cs->T, cs->T, tmp);
-    sc->F_total += F_cmd * frac;
+    sc->F_total += F;
     sc->P_total += v3_dot(fv, v);
 }

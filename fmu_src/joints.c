@@ -2,7 +2,12 @@
  * cart j+1's rear joint, as an axial and a radial Hunt-Crossley contact in the
  * frame of cart j. The forces derive from a potential that depends on cart
  * j's orientation too, so the matching torque is applied: the chain then
- * conserves energy exactly when undamped. */
+ * conserves energy exactly when undamped.
+ *
+ * Joint play (effects.joint_clearance.gap) is a dead band: both penetrations
+ * are reduced by the gap before the contact law sees them. The potential is
+ * then K (delta - gap)^(n+1)/(n+1) of the same coordinates, so the forces
+ * and the frame torque keep their form and the joint stays conservative. */
 #include "chain_internal.h"
 
 void joint_forces(Chain *c, const double *y, int j, double *p_damp) {
@@ -34,16 +39,18 @@ void joint_forces(Chain *c, const double *y, int j, double *p_damp) {
     v3_cross(adot, wA, a);
     double Da = v3_dot(D, a);
     double Dadot = v3_dot(Dd, a) + v3_dot(D, adot);
+    if (A == m->transducer) sc->joint_v_axial = -Dadot;  /* closing positive: Da grows as the joint opens */
     double Dr[3];
     v3_copy(Dr, D);
     v3_axpy(Dr, -Da, a);
     double rho = v3_norm(Dr);
 
     int sa = N_SLOT * A + SLOT_JA, sr = N_SLOT * A + SLOT_JR;
-    double sgn = Da >= 0 ? 1.0 : -1.0;
+    double sgn = Da >= 0 ? 1.0 : -1.0, gap = m->fx.gap;
 
-    /* axial */
-    double da = fabs(Da), dda = sgn * Dadot, fa = 0, fea = 0;
+    /* axial; a penetration below the play is an open contact (negative
+     * delta, so the contact memory sees the closing) */
+    double da = fabs(Da) - gap, dda = sgn * Dadot, fa = 0, fea = 0;
     if (da > 0) {
         fa = contact_force(&m->law[CC_JA], da, dda, contact_vi(st->v_onset[sa], dda, m->v_min), &fea);
         *p_damp += (fa - fea) * dda;
@@ -52,13 +59,16 @@ void joint_forces(Chain *c, const double *y, int j, double *p_damp) {
 
     /* radial */
     double u[3] = {0, 0, 0}, fr = 0, fer = 0, ddr = 0;
+    double dr = rho - gap;
     if (rho > 1e-15) {
         v3_scale(u, Dr, 1.0 / rho);
         ddr = v3_dot(u, Dd) - Da * v3_dot(u, adot);
-        fr = contact_force(&m->law[CC_JR], rho, ddr, contact_vi(st->v_onset[sr], ddr, m->v_min), &fer);
-        *p_damp += (fr - fer) * ddr;
+        if (dr > 0) {
+            fr = contact_force(&m->law[CC_JR], dr, ddr, contact_vi(st->v_onset[sr], ddr, m->v_min), &fer);
+            *p_damp += (fr - fer) * ddr;
+        }
     }
-    sc->delta[sr] = rho; sc->ddelta[sr] = ddr; sc->force[sr] = fr;
+    sc->delta[sr] = dr; sc->ddelta[sr] = ddr; sc->force[sr] = fr;
 
     /* force on A at pF; the opposite on B at pR */
     double f[3];

@@ -21,7 +21,15 @@
  * search starts at the axle's arc length and is closed-form on straights
  * (where the frame is the base's: no rotation at all) and plane arcs. The
  * code is specialised per kind of base element (straight, plane arc,
- * twisted) and per wheel, so that each case carries only its own work. */
+ * twisted) and per wheel, so that each case carries only its own work.
+ *
+ * Two effects (effects.h) change the driving wheels' running surface
+ * geometry: a cosine bump h(s) raises the surface under every cart, and the
+ * out-of-round wheels of one cart have the radius r0 + dr(x), x the distance
+ * rolled (a global state). Both add to the indentation; its gradient then has
+ * a tangential part -F_n (dh/ds ds/dx_t + dr/dx), the slope of the bump or of
+ * the wheel, applied through the wheel centre (a round wheel's normal passes
+ * through it), so the contact stays conservative. */
 #include "chain_internal.h"
 
 #if defined(__GNUC__)
@@ -35,10 +43,47 @@ typedef struct {
     double p_damp, p_roll;
 } WheelSum;
 
+/* What the bump and an out-of-round wheel add to the indentation of a
+ * driving wheel, and the slope d(indentation)/d(distance along t). */
+typedef struct {
+    double dh, slope;
+} SurfaceFx;
+
+/* Driving wheel k of cart i in its contact frame f. Kept out of line and
+ * returned by value: it runs only with one of the two effects on, and the
+ * hot path keeps its indentation in registers. */
+static SurfaceFx surface_effects(Chain *c, int i, int k, const TrackBase *b, const LocalFrame *f, double vt) {
+    const Effects *fx = &c->m.fx;
+    double dh = 0.0, slope = 0.0;
+    if (fx->bump_on) {
+        double L = c->m.track.length, s = b->s + f->ds, hs;
+        if (s >= L) s -= L;
+        else if (s < 0.0) s += L;
+        double h = effects_bump(fx, s, L, &hs);
+        if (hs != 0.0 || h != 0.0) {
+            /* ds/dx_t of the closest point: the surface point at lateral
+             * offset y travels (1 - y w_z + z w_y) times as far as the centreline */
+            const double *d = f->d, *w = f->w;
+            dh += h;
+            slope += hs / (1.0 - (d[1] * w[2] - d[2] * w[1]));
+        }
+    }
+    if (fx->oor_on && i == fx->oor_cart) {
+        int side = k == W_DL ? 0 : 1;
+        double drdx;
+        dh += effects_oor(fx, side, c->sc.oor_x[side], &drdx);
+        slope += drdx;
+        c->sc.oor_rate[side] = vt;  /* the wheel rolls without slip: theta' = v_t / r0 */
+    }
+    SurfaceFx r = {dh, slope};
+    return r;
+}
+
 /* Wheel k of cart i; x0 is the wheel centre's part along the body x and z
- * axes (base coordinates), shared by the wheel pair. */
+ * axes (base coordinates), shared by the wheel pair. surf (a constant): the
+ * bump or an out-of-round wheel is on; without, the code is the plain one. */
 static ALWAYS_INLINE void one_wheel(Chain *c, int i, const CartLocal *L, const TrackBase *b, const double *x0,
-                                    const int k, const int kind, WheelSum *acc) {
+                                    const int k, const int kind, const int surf, WheelSum *acc) {
     const ChainModel *m = &c->m;
     const CartGeometry *g = &m->g;
     ChainScratch *sc = &c->sc;
@@ -65,6 +110,7 @@ static ALWAYS_INLINE void one_wheel(Chain *c, int i, const CartLocal *L, const T
             ident = 1;
             v3_set(f.d, 0.0, q[1] + ds * ch[1], q[2] + ds * ch[2]);
             f.w = b->e->w;
+            if (surf) f.ds = ds;
         }
     } else {
         ok = tl_project_kind(b, q, L->axle.ds, drive ? TL_RUNNING : TL_GUIDE, h, &f, kind);
@@ -105,6 +151,12 @@ static ALWAYS_INLINE void one_wheel(Chain *c, int i, const CartLocal *L, const T
     double vt = vf[0];
     cs->wheel_speed[k] = vt / r;
     int slot = N_SLOT * i + SLOT_WHEEL + k;
+    SurfaceFx sf = {0.0, 0.0};
+    if (drive && surf) {
+        sf = surface_effects(c, i, k, b, &f, vt);
+        delta += sf.dh;
+        ddelta += sf.slope * vt;
+    }
     double fn = 0.0;
     if (delta > 0) {
         const ContactLaw *law = &m->law[drive ? CC_RW : CC_SW];
@@ -131,17 +183,26 @@ static ALWAYS_INLINE void one_wheel(Chain *c, int i, const CartLocal *L, const T
         v3_cross(tmp, arm, fv);
         v3_add(acc->T, acc->T, tmp);
     }
+    if (drive && surf && fn > 0.0) {
+        /* the slope's tangential force, through the wheel centre */
+        double ft[3] = {-fn * sf.slope, 0.0, 0.0}, fv[3], tmp[3];
+        if (ident) v3_copy(fv, ft);
+        else m3_mulv(fv, f.E, ft);
+        v3_add(acc->F, acc->F, fv);
+        v3_cross(tmp, rc, fv);
+        v3_add(acc->T, acc->T, tmp);
+    }
     sc->delta[slot] = delta;
     sc->ddelta[slot] = ddelta;
     sc->force[slot] = fn;
 }
 
 static ALWAYS_INLINE void four_wheels(Chain *c, int i, const CartLocal *L, const TrackBase *b, const double *xs,
-                                      const double *xd, const int kind, WheelSum *acc) {
-    one_wheel(c, i, L, b, xs, W_SL, kind, acc);
-    one_wheel(c, i, L, b, xs, W_SR, kind, acc);
-    one_wheel(c, i, L, b, xd, W_DL, kind, acc);
-    one_wheel(c, i, L, b, xd, W_DR, kind, acc);
+                                      const double *xd, const int kind, const int surf, WheelSum *acc) {
+    one_wheel(c, i, L, b, xs, W_SL, kind, surf, acc);
+    one_wheel(c, i, L, b, xs, W_SR, kind, surf, acc);
+    one_wheel(c, i, L, b, xd, W_DL, kind, surf, acc);
+    one_wheel(c, i, L, b, xd, W_DR, kind, surf, acc);
 }
 
 void wheel_forces(Chain *c, int i, const CartLocal *L, double *p_damp, double *p_roll) {
@@ -156,10 +217,18 @@ void wheel_forces(Chain *c, int i, const CartLocal *L, double *p_damp, double *p
         xs[j] = M[3 * j] * g->x_axle + M[3 * j + 2] * g->z_steer;
     }
     WheelSum acc = {{0, 0, 0}, {0, 0, 0}, *p_damp, *p_roll};
-    switch (b->kind) {
-    case TL_STRAIGHT: four_wheels(c, i, L, b, xs, xd, TL_STRAIGHT, &acc); break;
-    case TL_PLANAR: four_wheels(c, i, L, b, xs, xd, TL_PLANAR, &acc); break;
-    default: four_wheels(c, i, L, b, xs, xd, TL_TWISTED, &acc); break;
+    if (!c->m.fx.surface_on) {
+        switch (b->kind) {
+        case TL_STRAIGHT: four_wheels(c, i, L, b, xs, xd, TL_STRAIGHT, 0, &acc); break;
+        case TL_PLANAR: four_wheels(c, i, L, b, xs, xd, TL_PLANAR, 0, &acc); break;
+        default: four_wheels(c, i, L, b, xs, xd, TL_TWISTED, 0, &acc); break;
+        }
+    } else {
+        switch (b->kind) {
+        case TL_STRAIGHT: four_wheels(c, i, L, b, xs, xd, TL_STRAIGHT, 1, &acc); break;
+        case TL_PLANAR: four_wheels(c, i, L, b, xs, xd, TL_PLANAR, 1, &acc); break;
+        default: four_wheels(c, i, L, b, xs, xd, TL_TWISTED, 1, &acc); break;
+        }
     }
     *p_damp = acc.p_damp;
     *p_roll = acc.p_roll;

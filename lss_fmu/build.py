@@ -151,7 +151,8 @@ def generate_model_description(guid: str, sources: list[str]) -> str:
     out += ["    </SourceFiles>", "  </CoSimulation>", "  <UnitDefinitions>"]
     base = {"m": 'm="1"', "m/s": 'm="1" s="-1"', "N": 'kg="1" m="1" s="-2"', "W": 'kg="1" m="2" s="-3"',
             "J": 'kg="1" m="2" s="-2"', "kg": 'kg="1"', "s": 's="1"', "rad/s": 'rad="1" s="-1"',
-            "N.s/m": 'kg="1" s="-1"', "N/m": 'kg="1" s="-2"', "1": ""}
+            "N.s/m": 'kg="1" s="-1"', "N/m": 'kg="1" s="-2"', "N.s2/m2": 'kg="1" m="-1"',
+            "rad": 'rad="1"', "1": ""}
     for u in units:
         out.append(f'    <Unit name="{u}"><BaseUnit {base[u]}/></Unit>')
     out += ["  </UnitDefinitions>", "  <LogCategories>",
