@@ -27,7 +27,9 @@ which identification never reads.
 
 `generate_set(...)` runs measurements in parallel (one ChainSimulator per
 worker process) with a progress bar; `lss rig` is its command line
-(lss_fmu.rig_cli).
+(lss_fmu.rig_cli). Either set can carry undeclared effects of the FMU's
+catalogue and an artefact outside it (lss_fmu.rig_effects): in the FMU
+parameters and the truth, never in meta.json.
 """
 from __future__ import annotations
 
@@ -48,6 +50,7 @@ from typing import Mapping, Optional, Sequence, Union
 import numpy as np
 
 from . import measurement as M
+from . import rig_effects as E
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
 from .layouts import TABLE2, load_track
 from .sensor import CHANNELS, S_CHANNEL, SensorModel
@@ -197,6 +200,10 @@ class Case:
     transducer: int
     arrival_time: float        # expected passage of s_M
     stop_time: float           # simulation end
+    # undeclared effects (lss_fmu.rig_effects): in fmu_params and the truth, never in meta.json
+    effects: dict = dataclasses.field(default_factory=dict)     # name -> drawn parameters and details
+    artefacts: dict = dataclasses.field(default_factory=dict)   # name -> definition (sensor stage)
+    effect_seed: Optional[int] = None
 
     @property
     def id(self) -> str:
@@ -259,13 +266,21 @@ def _as_built_track(layout: str, seed: int, out_dir: Optional[Path]) -> tuple:
 
 
 def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir: Optional[Path] = None,
-              lap_seconds: Optional[float] = None, extra_params: Optional[Mapping] = None) -> Case:
+              lap_seconds: Optional[float] = None, extra_params: Optional[Mapping] = None,
+              effects: Sequence[str] = (), effect_seed: Optional[int] = None,
+              artefacts: Sequence[str] = ()) -> Case:
     """The definition of measurement `number` of a set, drawn from the seed.
 
     The draws of the layout-dependent values depend only on (seed, layout) and
     (seed, number), not on the set or on which other measurements are made, so
     the recovery and field sets share them and any subset gives the same
-    measurements as the full run."""
+    measurements as the full run.
+
+    `effects` (names from rig_effects.CATALOGUE) are switched on in the FMU
+    parameters, `artefacts` (rig_effects.ARTEFACTS) added in the sensor stage,
+    both drawn from (effect_seed, default `seed`; layout): every measurement on
+    a layout gets the same ones. meta.json says nothing about them."""
+    effects, artefacts = E.parse_effects(effects), E.parse_artefacts(artefacts)
     if set_name not in SETS:
         raise ValueError(f"unknown set {set_name!r} (known: {', '.join(SETS)})")
     if number not in NUMBERING:
@@ -290,7 +305,7 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
     truth = {"v_s": v, "d": d, "mu_d": mu, "s_M": s_M, "K_P": kp, "K_I": ki}
     cor = dict(zip(COR_NAMES, TABLE3[number - 1]))
 
-    field, layout_fmu = {}, layout
+    field, layout_fmu, geometry = {}, layout, None
     law = "LW"
     params = {}
     if set_name == "field":
@@ -298,7 +313,7 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
         rf = np.random.default_rng([seed, 3000 + _layout_index(layout)])
         mass = 1.0 + _clip(rf.normal(0.0, FIELD_MASS_STD), -FIELD_MASS_MAX, FIELD_MASS_MAX)
         gap = _clip(float(BY_NAME["track.guide_gap"].start) + rf.normal(0.0, FIELD_GAP_STD), *FIELD_GAP_RANGE)
-        path, desc, _ = _as_built_track(layout, seed, None if answers_dir is None else answers_dir / "tracks")
+        path, desc, geometry = _as_built_track(layout, seed, None if answers_dir is None else answers_dir / "tracks")
         if path is not None:
             layout_fmu = str(Path(path).resolve())
         field = {"cart.mass_factor": mass, "track.guide_gap": gap, "as_built_track": desc,
@@ -324,10 +339,20 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
         "chain.pretension": d, "wheel.mu_roll": mu, "drive.Kp": kp, "drive.Ki": ki, "drive.v_ref": v,
         "chain.transducer": idx,
     })
+    eff, arts, eseed = {}, {}, None
+    if effects or artefacts:
+        from .track_geometry import Track
+        eseed = seed if effect_seed is None else int(effect_seed)
+        geom = track if geometry is None else Track(geometry)   # the track the FMU runs (joints of the as-built)
+        eff = E.effects_truth(effects, eseed, geom, transducer=idx, stream=_layout_index(layout),
+                              pretension=NOMINAL_PRETENSION[layout])
+        for d in eff.values():
+            params.update(d["parameters"])
+        arts = E.draw_artefacts(artefacts, eseed, L, stream=_layout_index(layout), avoid_s=s_M)
     if extra_params:
         params.update(extra_params)
     return Case(set_name, number, seed, layout, layout_fmu, L, N, v_nom, d_nom, d_factor, s_M_nom, truth, cor,
-                law, params, field, idx, arrival, stop)
+                law, params, field, idx, arrival, stop, eff, arts, eseed)
 
 
 def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) -> dict:
@@ -380,6 +405,9 @@ def truth_for(case: Case, acq: dict, sensor: SensorModel, gen: dict, fmu_sha: st
         "fmu_parameters": case.fmu_params,
         "layout_fmu": case.layout_fmu if case.layout_fmu == case.layout else case.field.get("as_built_file"),
         "transducer_index": case.transducer,
+        "effect_seed": case.effect_seed,
+        "effects": case.effects,
+        "artefacts": {k: {**v, "applied": acq.get("artefacts", {}).get(k)} for k, v in case.artefacts.items()},
         "settle_time": SETTLE_TIME,
         "trigger_time_sim": acq["trigger_time"],
         "stop_time_sim": acq["stop_time"],
@@ -425,21 +453,30 @@ def simulate_case(case: Case, sim, sensor: SensorModel, lap_seconds: Optional[fl
     outputs = CHANNELS + [S_CHANNEL, "chain.v_mean"]
     rec = sim.simulate(case.stop_time, step=sensor.internal_step, params=case.fmu_params,
                        outputs=outputs, tolerance=tolerance)
+    arts = {}
+    if case.artefacts:  # outside the catalogue: in the sensor stage, before the anti-alias filter
+        rec, arts = E.apply_artefacts(rec, case.artefacts, case.track_length, arm_time=SETTLE_TIME)
     rng = np.random.default_rng([case.seed, case.number, 1])
     n = None if lap_seconds is None else int(round(lap_seconds * sensor.sample_rate))
     samples, acq = sensor.acquire(rec, case.truth["s_M"], case.track_length, rng, arm_time=SETTLE_TIME,
                                   n_samples=n)
+    for info in arts.values():
+        info["centres_since_trigger_s"] = [tc - acq["trigger_time"] for tc in info["centres_sim_s"]]
+    acq["artefacts"] = arts
     return samples, acq, rec
 
 
 def run_measurement(set_name: str, number: int, out: Union[str, Path], sim, seed: int = DEFAULT_SEED,
                     lap_seconds: Optional[float] = None, sensor: Optional[SensorModel] = None,
-                    fmu_sha: str = "", overwrite: bool = False, extra_params: Optional[Mapping] = None) -> dict:
+                    fmu_sha: str = "", overwrite: bool = False, extra_params: Optional[Mapping] = None,
+                    effects: Sequence[str] = (), effect_seed: Optional[int] = None,
+                    artefacts: Sequence[str] = ()) -> dict:
     """Simulate one measurement and write DIR/mNN and DIR/answers/mNN/truth.json."""
     out = Path(out)
     sensor = sensor or SensorModel()
     t0, c0 = time.perf_counter(), time.process_time()
-    case = make_case(set_name, number, seed, answers_dir(out), lap_seconds, extra_params)
+    case = make_case(set_name, number, seed, answers_dir(out), lap_seconds, extra_params, effects, effect_seed,
+                     artefacts)
     samples, acq, _ = simulate_case(case, sim, sensor, lap_seconds)
     t_sim_wall, t_sim_cpu = time.perf_counter() - t0, time.process_time() - c0
     meta = meta_for(case, sensor, acq["n_samples"], acq["full_lap"])
@@ -474,19 +511,21 @@ def _init_worker(fmu: str) -> None:
     _WORKER["sim"] = ChainSimulator(Path(fmu), instance_name=f"rig{os.getpid()}")
 
 
-def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite):
+def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), None, ())):
     try:
         return run_measurement(set_name, number, out, _WORKER["sim"], seed, lap_seconds, fmu_sha=fmu_sha,
-                               overwrite=overwrite)
+                               overwrite=overwrite, effects=fx[0], effect_seed=fx[1], artefacts=fx[2])
     except Exception as exc:  # one failed measurement must not stop the set
         return {"number": number, "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
 
 
-def _existing(out: Path, number: int, set_name: str, seed: int, sha: str) -> Optional[str]:
+def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
+              fx: tuple = ((), None, ())) -> Optional[str]:
     """None if measurement `number` is not in `out`; "" if it is there and is what
-    this run would make (same set, seed, FMU, parameters, full lap); otherwise
-    the reason why it differs."""
+    this run would make (same set, seed, FMU, parameters, undeclared effects and
+    artefacts, full lap); otherwise the reason why it differs. `fx`: (effects,
+    effect_seed, artefacts) of this run."""
     folder, truth = out / folder_name(number), answers_dir(out) / folder_name(number) / "truth.json"
     if not (folder / M.META_FILE).is_file() or not truth.is_file():
         return None
@@ -500,7 +539,18 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str) -> Opt
         return "it is a shortened run (--lap-seconds)"
     if t.get("fmu_sha256") != sha:
         return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
-    want = {k: v for k, v in make_case(set_name, number, seed).fmu_params.items() if k != "layout.name"}
+    case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2])
+    had = (sorted(t.get("effects") or {}), sorted(t.get("artefacts") or {}))
+    if had != (sorted(case.effects), sorted(case.artefacts)):
+        named = lambda e, a: ", ".join(e + a) or "none"  # noqa: E731
+        return (f"it was made with other undeclared effects ({named(*had)}; this run: "
+                f"{named(sorted(case.effects), sorted(case.artefacts))})")
+    if t.get("effect_seed") != case.effect_seed:
+        return f"its undeclared effects were drawn with effect seed {t.get('effect_seed')}, not {case.effect_seed}"
+    have_art = {k: {a: b for a, b in v.items() if a != "applied"} for k, v in (t.get("artefacts") or {}).items()}
+    if have_art != case.artefacts:
+        return "its artefacts differ from what this version of the rig draws"
+    want = {k: v for k, v in case.fmu_params.items() if k != "layout.name"}
     have = {k: v for k, v in t.get("fmu_parameters", {}).items() if k != "layout.name"}
     if want != have:
         diff = sorted(k for k in set(want) | set(have) if want.get(k) != have.get(k))
@@ -511,7 +561,8 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str) -> Opt
 def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequence[int]] = None,
                  seed: int = DEFAULT_SEED, workers: Optional[int] = None, fmu: Optional[Union[str, Path]] = None,
                  lap_seconds: Optional[float] = None, overwrite: bool = False, progress: bool = True,
-                 log=print) -> list:
+                 log=print, effects: Sequence[str] = (), effect_seed: Optional[int] = None,
+                 artefacts: Sequence[str] = ()) -> list:
     """Generate measurements of a set into `out`, in parallel.
 
     Measurements already in `out` that this run would make identically (same
@@ -521,16 +572,27 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
     shortened run), the run stops with the reason unless overwrite=True, and
     then every such measurement is made again too. The FMU is copied into
     out/fmu/ first, so a rebuild during the run changes nothing. Returns one
-    result dict per measurement (with 'error' for a failed one)."""
+    result dict per measurement (with 'error' for a failed one).
+
+    `effects`, `effect_seed`, `artefacts`: undeclared effects switched on in
+    every measurement of the run (make_case); different ones make a different
+    measurement."""
     from tqdm import tqdm
 
     from .runner import fmu_path
     if set_name not in SETS:
         raise ValueError(f"unknown set {set_name!r} (known: {', '.join(SETS)})")
+    effects, artefacts = E.parse_effects(effects), E.parse_artefacts(artefacts)
+    fx = (tuple(effects), None if not (effects or artefacts) else int(seed if effect_seed is None else effect_seed),
+          tuple(artefacts))
     numbers = list(ALL_NUMBERS) if numbers is None else sorted(set(int(n) for n in numbers))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     src = fmu_path(None if fmu is None else Path(fmu))
+    lacks = E.fmu_lacks(src, effects) if effects else []
+    if lacks:
+        raise ValueError(f"the FMU {src} has no parameter {', '.join(lacks)}: build an FMU with the effects "
+                         f"catalogue (lss build) or leave out --effects {','.join(effects)}")
     sha = sha256(src)
     fdir = out / "fmu"
     fdir.mkdir(exist_ok=True)
@@ -545,7 +607,7 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
     todo, results = [], []
     stale = {}
     for n in ALL_NUMBERS:
-        state = _existing(out, n, set_name, seed, sha)
+        state = _existing(out, n, set_name, seed, sha, fx)
         if state:
             stale[n] = state
         if n not in numbers:
@@ -561,13 +623,17 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
                               f"the FMU in {fdir} that made them")
     todo = sorted(set(todo) | set(stale))
     # longest first: better balance over the workers
-    cases = {n: make_case(set_name, n, seed, None, lap_seconds) for n in todo}
+    cases = {n: make_case(set_name, n, seed, None, lap_seconds, effects=fx[0], effect_seed=fx[1], artefacts=fx[2])
+             for n in todo}
     todo.sort(key=lambda n: -cases[n].cost)
     workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))
     if todo:
         est = sum(c.cost for c in cases.values())
         log(f"lss rig: {len(todo)} measurement(s) of set '{set_name}' (seed {seed}) into {out}, {workers} "
             f"worker(s); {est / 1e3:.0f}k cart-seconds to simulate")
+        if effects or artefacts:
+            log(f"lss rig: undeclared effects {', '.join(effects + artefacts)} (effect seed {fx[1]}); meta.json "
+                f"says nothing about them, the truth is in {answers_dir(out)}")
     bar = tqdm(total=len(todo), desc=f"rig {set_name}", unit="meas", disable=not progress or not todo,
                dynamic_ncols=True)
     try:
@@ -575,7 +641,7 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
             _init_worker(str(fmu_copy))
             try:
                 for n in todo:
-                    r = _work(set_name, n, str(out), seed, lap_seconds, sha, overwrite)
+                    r = _work(set_name, n, str(out), seed, lap_seconds, sha, overwrite, fx)
                     results.append(r)
                     _report(bar, r, log)
                     _write_set_json(out, set_name, seed, sha, fmu_copy, results)
@@ -584,7 +650,8 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
         else:
             with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
                                      initargs=(str(fmu_copy),)) as ex:
-                futs = [ex.submit(_work, set_name, n, str(out), seed, lap_seconds, sha, overwrite) for n in todo]
+                futs = [ex.submit(_work, set_name, n, str(out), seed, lap_seconds, sha, overwrite, fx)
+                        for n in todo]
                 for f in as_completed(futs):
                     r = f.result()
                     results.append(r)

@@ -2,6 +2,7 @@
 
     lss rig --set recovery|field --out DIR [--measurements 1,2,19-22]
             [--workers N] [--seed S] [--overwrite] [--fmu PATH] [--lap-seconds T]
+            [--effects wheel_oor,sensor,...] [--effect-seed S] [--artefact channel_bump]
 """
 from __future__ import annotations
 
@@ -35,6 +36,16 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--lap-seconds", type=float, default=None, metavar="T",
                     help="log only T seconds instead of one lap (quick checks; such measurements are "
                          "marked as partial)")
+    from .rig_effects import ARTEFACTS, CATALOGUE
+    ap.add_argument("--effects", metavar="LIST", default=None,
+                    help=f"undeclared effects to switch on in the FMU, comma separated, or all (known: "
+                         f"{', '.join(CATALOGUE)}); drawn per layout from --effect-seed; meta.json says "
+                         f"nothing, the truth goes to DIR/answers/ (docs/measurements.md, 'Undeclared effects')")
+    ap.add_argument("--effect-seed", type=int, default=None, metavar="S",
+                    help="seed of the effect and artefact draws (default: --seed)")
+    ap.add_argument("--artefact", metavar="LIST", default=None,
+                    help=f"artefacts outside the effects catalogue, added in the sensor stage (known: "
+                         f"{', '.join(ARTEFACTS)})")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     return ap
 
@@ -48,10 +59,23 @@ def rig_main(argv: Optional[Sequence[str]] = None) -> int:
         args = ap.parse_args(list(argv) if argv is not None else None)
     except SystemExit as exc:
         return int(exc.code or 0)
+    from .rig_effects import parse_artefacts, parse_effects
     try:
         numbers = rig.parse_numbers(args.measurements)
+        effects = parse_effects(args.effects, "--effects")
+        artefacts = parse_artefacts(args.artefact, "--artefact")
     except ValueError as exc:
         print(f"lss rig: {exc}", file=sys.stderr)
+        return 2
+    if args.effects is not None and not effects:
+        from .rig_effects import CATALOGUE
+        print(f"lss rig: --effects: no effect named (known: {', '.join(CATALOGUE)}, or all)", file=sys.stderr)
+        return 2
+    if args.effect_seed is not None and not (effects or artefacts):
+        print("lss rig: --effect-seed needs --effects or --artefact", file=sys.stderr)
+        return 2
+    if args.effect_seed is not None and args.effect_seed < 0:
+        print(f"lss rig: --effect-seed {args.effect_seed}: must be 0 or more", file=sys.stderr)
         return 2
     if args.workers is not None and args.workers < 1:
         print(f"lss rig: --workers {args.workers}: must be at least 1", file=sys.stderr)
@@ -66,7 +90,8 @@ def rig_main(argv: Optional[Sequence[str]] = None) -> int:
         results = rig.generate_set(args.set_name, args.out, numbers, seed=args.seed, workers=args.workers,
                                    fmu=args.fmu, lap_seconds=args.lap_seconds, overwrite=args.overwrite,
                                    progress=not args.no_progress,
-                                   log=lambda msg: print(msg, file=sys.stderr))
+                                   log=lambda msg: print(msg, file=sys.stderr), effects=effects,
+                                   effect_seed=args.effect_seed, artefacts=artefacts)
     except (FileExistsError, ValueError, OSError) as exc:
         print(f"lss rig: {exc}", file=sys.stderr)
         return 2
