@@ -4,6 +4,8 @@ PY ?= python3
 VENV := .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# test processes: one per core (the suite is CPU-bound; CI has 2 cores)
+JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 
 .PHONY: all fmu demo test venv clean
 
@@ -24,7 +26,7 @@ demo: fmu
 	$(VPY) -m lss_fmu.demo --out demo_out
 
 test: fmu
-	$(VPY) -m pytest -q -p no:cacheprovider tests
+	$(VPY) -m pytest -q -p no:cacheprovider -n $(JOBS) tests
 
 clean:
 	rm -rf build demo_out

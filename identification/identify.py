@@ -5,6 +5,13 @@ it is known. Run again after an interruption, the same seed makes the
 optimiser ask for the same points in the same order, and the journal answers
 them without simulating: the result is the same and no evaluation is lost or
 counted twice. The result is written atomically.
+
+With `workers` > 1 the parallel Complex-RFP (speculative strategy) asks for
+exactly the points the serial method would use, plus speculative ones it may
+discard; the journal holds all of them. The result's history is the
+optimiser's own: the evaluations it used, in the order it used them
+(`ComplexHistory.used_order`), and its iteration table, so a run with workers
+and a serial run from the same seed give the same history, figure and JSON.
 """
 from __future__ import annotations
 
@@ -18,6 +25,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from .complex_rf import minimize_complex
+from .optim_result import ComplexResult, _jsonable
 from .problem import SHORT, IdentificationProblem, nrmsd
 
 
@@ -33,13 +41,23 @@ class Journal:
         self.cache: dict[str, float] = {}
         self.replayed = 0
         if self.path and self.path.exists():
-            with open(self.path) as fh:
+            good = 0  # bytes of whole, readable lines
+            with open(self.path, "rb") as fh:
                 for line in fh:
                     try:
+                        if not line.endswith(b"\n"):
+                            raise ValueError("line without its end")
                         rec = json.loads(line)
-                    except json.JSONDecodeError:
+                        k, f = rec["k"], float(rec["f"])
+                    except (ValueError, KeyError, TypeError):
                         break  # a line cut by the interruption: everything after it is redone
-                    self.cache[rec["k"]] = float(rec["f"])
+                    self.cache[k] = f
+                    good += len(line)
+            if good < self.path.stat().st_size:
+                # drop the cut line, or the next record would be glued onto it and
+                # lost, with everything after it, at the next restart
+                with open(self.path, "r+b") as fh:
+                    fh.truncate(good)
         self._fh = open(self.path, "a") if self.path else None
 
     def get(self, x) -> Optional[float]:
@@ -72,27 +90,33 @@ class JournaledObjective:
     def __call__(self, x) -> float:
         f = self.journal.get(x)
         if f is None:
-            f = self.problem(x)
             self.evaluated += 1
+            f = self.problem(x)  # an exception is not journaled: the optimiser makes it a bad point
             self.journal.put(x, f)
         return f
 
 
-
-def journaled_map(problem: IdentificationProblem, journal: Journal, executor) -> Callable:
-    """A map for the parallel optimiser: the journal answers what it knows,
-    the executor's workers (one FMU instance each) simulate the rest."""
+def journaled_map(journal: Journal, executor) -> Callable:
+    """A `map_fn` for the parallel optimiser: the journal answers what it
+    knows; the executor's workers (one FMU instance each) apply `fn`, the
+    optimiser's wrapped objective (`SafeObjective`), to the rest. An exception
+    in a worker thus comes back as a bad point with its message, which the
+    optimiser logs and ranks worst; the run goes on. Values are journaled as
+    they come back; an evaluation that raised is not journaled (as in the
+    serial case) and is tried again after a restart."""
     counter = {"evaluated": 0}
 
-    def _map(fn, xs: Sequence) -> list:
-        out = [journal.get(x) for x in xs]
+    def _map(fn: Callable, xs: Sequence) -> list:
+        out: list = [journal.get(x) for x in xs]
         todo = [i for i, f in enumerate(out) if f is None]
         if todo:
-            for i, f in zip(todo, executor.map(problem, [xs[i] for i in todo])):
-                out[i] = float(f)
-                journal.put(xs[i], out[i])
             counter["evaluated"] += len(todo)
-        return out
+            for i, r in zip(todo, executor.map(fn, [xs[i] for i in todo])):
+                out[i] = r
+                f, err = (r[0], r[2]) if isinstance(r, tuple) and len(r) == 3 else (r, None)
+                if err is None:  # a value (possibly non-finite) the objective returned
+                    journal.put(xs[i], float(f))
+        return out  # journal answers as plain values, the rest as (f, bad, error)
     _map.counter = counter
     return _map
 
@@ -110,8 +134,13 @@ class IdentificationResult:
     evaluated: int
     replayed: int
     message: str
-    history_f: np.ndarray
+    history_f: np.ndarray            # f of the used evaluations, in the order the method used them
     seconds: float
+    iterations: dict = None          # the optimiser's iteration table (ComplexHistory.iterations)
+    nfev_total: int = 0              # all evaluations, incl. speculative ones the method discarded
+    nrounds: int = 0                 # wall-clock rounds (batches of evaluations)
+    workers: int = 1
+    optimizer: Optional[ComplexResult] = None  # the optimiser's result, with its full history
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -122,9 +151,12 @@ class IdentificationResult:
             "nrmsd0": dict(zip(_channels(), map(float, self.H0))),
             "x": dict(zip(p.free, map(float, self.x))), "f": self.f,
             "nrmsd": dict(zip(_channels(), map(float, self.H))),
-            "values": {SHORT[k]: v for k, v in p.values(self.x).items()},
+            "values": {SHORT.get(k, k): v for k, v in p.values(self.x).items()},
             "nfev": self.nfev, "simulated": self.evaluated, "replayed": self.replayed,
             "message": self.message, "history_f": list(map(float, self.history_f)),
+            "iterations": _jsonable(self.iterations or {}),
+            "nfev_total": self.nfev_total, "discarded": self.nfev_total - self.nfev,
+            "rounds": self.nrounds, "workers": self.workers,
             "seconds": self.seconds, "window_s": float(p.times[-1]),
         }
 
@@ -138,34 +170,44 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
              journal: Optional[Path] = None, progress: bool = True, f_tol: float = 1e-6,
              x_tol: float = 1e-4, workers: int = 1) -> IdentificationResult:
     """Complex-RF on the problem (the parallel variant with `workers` > 1,
-    each worker process with its own FMU instance)."""
+    each worker process with its own FMU instance).
+
+    `nfev` and `history_f` count the evaluations the method used (`max_evals`
+    limits them); with workers, `nfev_total` adds the speculative ones it
+    discarded. An exception of the objective, in this process or a worker, is
+    a bad point with a logged line, never the end of the run."""
     t0 = time.time()
     jr = Journal(journal)
-    obj = JournaledObjective(problem, jr)
     x0 = problem.x0_vector()
     if x0 is None:
         x0 = np.array([0.5 * (lo + hi) for lo, hi in problem.bounds_array])
     opts = dict(x0=x0, max_evals=max_evals, seed=seed, progress=progress, f_tol=f_tol, x_tol=x_tol)
     try:
-        f0 = obj(x0)
         if workers > 1:
             from concurrent.futures import ProcessPoolExecutor
             from .complex_rfp import minimize_complex_parallel
             with ProcessPoolExecutor(workers) as ex:
-                mapper = journaled_map(problem, jr, ex)
+                mapper = journaled_map(jr, ex)
                 res = minimize_complex_parallel(problem, problem.bounds_array, n_parallel=workers,
-                                                map_fn=mapper, **opts)
-            evaluated = obj.evaluated + mapper.counter["evaluated"]
+                                                strategy="speculative", map_fn=mapper, **opts)
+            evaluated = mapper.counter["evaluated"]
         else:
+            obj = JournaledObjective(problem, jr)
             res = minimize_complex(obj, problem.bounds_array, **opts)
             evaluated = obj.evaluated
+        hist = res.history
+        used = hist.used_order()
+        history_f = np.asarray(hist.f, float)[used]
+        f0 = float(history_f[0])  # x0 is the first point of the initial complex
         H0 = _safe_H(problem, x0)
         H = _safe_H(problem, res.x)
     finally:
         jr.close()
-    return IdentificationResult(problem, x0, f0, H0, np.asarray(res.x), float(res.fun), H, res.nfev,
-                                evaluated, jr.replayed, res.message, np.asarray(res.history.f, float),
-                                time.time() - t0)
+    return IdentificationResult(problem, x0, f0, H0, np.asarray(res.x), float(res.fun), H, int(res.nfev_used),
+                                evaluated, jr.replayed, res.message, history_f, time.time() - t0,
+                                iterations={k: np.asarray(v).copy() for k, v in hist.iterations.items()},
+                                nfev_total=int(res.nfev), nrounds=int(res.nrounds), workers=max(1, int(workers)),
+                                optimizer=res)
 
 
 def _safe_H(problem: IdentificationProblem, x) -> np.ndarray:
