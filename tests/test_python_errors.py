@@ -15,6 +15,7 @@ import pytest
 
 from lss_fmu.atomic import write_atomic, write_json_atomic
 from lss_fmu.runner import ChainSimulator, SimulationError
+from test_layout_parser import MALFORMED
 
 
 @pytest.fixture(scope="module")
@@ -51,6 +52,23 @@ def test_malformed_layout_file_names_the_line(csim, tmp_path):
     with pytest.raises(SimulationError) as exc:
         short(csim, **{"layout.name": str(path)})
     assert "line 5" in str(exc.value) and "sideways" in str(exc.value)
+
+
+@pytest.mark.parametrize("text,line,fragment", [m[1:] for m in MALFORMED] + [
+    ("wheel A\ncoupling A\nmotors 2\nstraight 10\ncurve 3 180 left\nstraight 10\ncurve 3 90 left\n",
+     None, "does not close")], ids=[m[0] for m in MALFORMED] + ["does not close"])
+def test_every_malformed_layout_is_refused_by_the_fmu(csim, tmp_path, text, line, fragment):
+    """The layout reader's refusals (test_layout_parser.MALFORMED) reach the
+    FMU's user in one line, with the file and the line number."""
+    path = tmp_path / "bad.layout"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    with pytest.raises(SimulationError) as exc:
+        short(csim, **{"layout.name": str(path)})
+    msg = str(exc.value)
+    assert fragment in msg and "bad.layout" in msg and "\n" not in msg
+    if line is not None:
+        assert f"line {line}:" in msg
+    assert len(short(csim)) == 3  # the instance stays usable
 
 
 def test_unknown_variable_raises_key_error_naming_it(csim):
