@@ -1,7 +1,8 @@
 """The stages of `make demo` after the plain simulation: a measurement of the
 built-in layout 7 by the virtual transducer cart, the identification of its
-four CoRs with Complex-RF, and the report: identified against true values,
-the paper's figures, and what the objective's profile says."""
+four CoRs with Complex-RF, the report (identified against true values, the
+paper's figures), and closing the loop on data with an undeclared effect
+(identification.demo_close_loop)."""
 from __future__ import annotations
 
 import time
@@ -53,7 +54,7 @@ def run_stages(out: Path) -> list[str]:
         short = SHORT[k]
         tv = true.get(short, true.get(k, float("nan"))) if isinstance(true, dict) else float("nan")
         rows.append(f"| {short} | {tv:.3f} | {x0:.3f} | {x:.3f} |")
-    return [
+    sections = [
         "## Measurement\n",
         f"Recovery measurement {MEASUREMENT} on layout 7 from the virtual transducer cart "
         f"({info['n_samples']} samples at 300 Hz, {info['wall_s']:.0f} s to make), in `data/`; "
@@ -67,5 +68,7 @@ def run_stages(out: Path) -> list[str]:
         "In steady running the chain is chaotic and the seven forces hardly constrain the CoRs "
         "(docs/identification.md): read the identified values with that in mind.\n",
     ]
+    from .demo_close_loop import run_close_loop_stage
+    return sections + run_close_loop_stage(out)
 
 

@@ -17,14 +17,15 @@ LABELS = ["joint F_x", "joint F_y", "joint F_z", "steering left", "steering righ
           "driving left", "driving right"]
 
 
-def forces_overlay(times, measured, initial, optimum, path: Path, title: str) -> Path:
+def forces_overlay(times, measured, initial, optimum, path: Path, title: str,
+                   labels: tuple = ("initial", "optimum")) -> Path:
     fig, axes = plt.subplots(len(FORCE_CHANNELS), 1, figsize=(11, 13), sharex=True)
     for j, ax in enumerate(axes):
         ax.plot(times, measured[:, j], color="k", lw=0.8, label="measured")
         if initial is not None:
-            ax.plot(times, initial[:, j], color="tab:blue", lw=0.7, ls=":", label="initial")
+            ax.plot(times, initial[:, j], color="tab:blue", lw=0.7, ls=":", label=labels[0])
         if optimum is not None:
-            ax.plot(times, optimum[:, j], color="tab:red", lw=0.7, ls="--", label="optimum")
+            ax.plot(times, optimum[:, j], color="tab:red", lw=0.7, ls="--", label=labels[1])
         ax.set_ylabel(f"{LABELS[j]}, N", fontsize=8)
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8, ncol=3)
@@ -62,11 +63,11 @@ def history(f_per_eval, path: Path, title: str, series: dict | None = None) -> P
     return Path(path).with_suffix(".png")
 
 
-def nrmsd_bars(H0, H, path: Path, title: str) -> Path:
+def nrmsd_bars(H0, H, path: Path, title: str, labels: tuple = ("initial", "final")) -> Path:
     fig, ax = plt.subplots(figsize=(8, 4))
     x = np.arange(len(LABELS))
-    ax.bar(x - 0.2, 100 * np.asarray(H0), 0.4, label="initial")
-    ax.bar(x + 0.2, 100 * np.asarray(H), 0.4, label="final")
+    ax.bar(x - 0.2, 100 * np.asarray(H0), 0.4, label=labels[0])
+    ax.bar(x + 0.2, 100 * np.asarray(H), 0.4, label=labels[1])
     ax.set_xticks(x, LABELS, rotation=30, ha="right", fontsize=8)
     ax.set_ylabel("NRMSD H_j, %")
     ax.legend()

@@ -32,6 +32,17 @@ BAD_VALUE = 100.0  # worse than any simulation that ran (7 channels at NRMSD ~3.
 _SIMULATORS: dict = {}
 
 
+def is_effect_parameter(name: str) -> bool:
+    """A model extension of the close-loop (issue 7) added to the design vector."""
+    from lss_fmu.variables import BY_NAME
+    return name.startswith("effects.") and name in BY_NAME and BY_NAME[name].causality == "parameter"
+
+
+def short(name: str) -> str:
+    """The paper's symbol of a design variable; effect parameters keep their FMU name."""
+    return SHORT.get(name, name)
+
+
 def simulator():
     """The process's own FMU instance (created on first use, reused after)."""
     from lss_fmu.runner import ChainSimulator
@@ -41,10 +52,19 @@ def simulator():
     return _SIMULATORS[pid]
 
 
-def nrmsd(measured: np.ndarray, simulated: np.ndarray) -> np.ndarray:
-    """H_j per channel (Eq. 11-12)."""
+def tared(residual: np.ndarray, tare: Optional[np.ndarray]) -> np.ndarray:
+    """The residual with each channel's mean removed as far as the transducer's
+    zero tolerance `tare` (N per channel) allows: a zero error within the
+    specification is not the model's to explain (None: nothing removed)."""
+    if tare is None:
+        return residual
+    return residual - np.clip(residual.mean(axis=0), -np.asarray(tare), np.asarray(tare))
+
+
+def nrmsd(measured: np.ndarray, simulated: np.ndarray, tare: Optional[np.ndarray] = None) -> np.ndarray:
+    """H_j per channel (Eq. 11-12); with `tare`, after the zero tolerance (see tared)."""
     span = measured.max(axis=0) - measured.min(axis=0)
-    rmsd = np.sqrt(np.mean((measured - simulated) ** 2, axis=0))
+    rmsd = np.sqrt(np.mean(tared(measured - simulated, tare) ** 2, axis=0))
     return rmsd / np.where(span > 0, span, 1.0)
 
 
@@ -62,17 +82,23 @@ class IdentificationProblem:
     settle: float = 3.0
     tolerance: Optional[float] = None
     name: str = "measurement"
+    tare: Optional[np.ndarray] = None    # per force channel, N: zero tolerance taken out (None: Eq. 10-12 as is)
 
     def __post_init__(self):
         if self.model not in CONTACT_MODELS:
             raise ValueError(f"unknown contact model {self.model!r}: use one of {', '.join(CONTACT_MODELS)}")
         self.samples = np.asarray(self.samples, float)
         self.times = np.asarray(self.times, float)
+        if self.tare is not None:
+            self.tare = np.asarray(self.tare, float)
+            if self.tare.shape != (len(FORCE_CHANNELS),) or not np.all(self.tare >= 0):
+                raise ValueError(f"tare must be {len(FORCE_CHANNELS)} non-negative values (N), got {self.tare}")
         if self.samples.ndim != 2 or self.samples.shape[1] != len(FORCE_CHANNELS):
             raise ValueError(f"samples must have {len(FORCE_CHANNELS)} force columns, got {self.samples.shape}")
         for name in self.free:
-            if name not in DESIGN:
-                raise ValueError(f"unknown design variable {name!r}: use {', '.join(DESIGN)}")
+            if name not in DESIGN and not is_effect_parameter(name):
+                raise ValueError(f"unknown design variable {name!r}: use {', '.join(DESIGN)} "
+                                 f"or an FMU parameter effects.*")
             if name not in self.bounds:
                 raise ValueError(f"no bounds for design variable {name!r}")
             lo, hi = self.bounds[name]
@@ -119,7 +145,7 @@ class IdentificationProblem:
                                   tolerance=self.tolerance)
 
     def channel_errors(self, x: Sequence[float]) -> np.ndarray:
-        return nrmsd(self.samples, self.simulate(x))
+        return nrmsd(self.samples, self.simulate(x), self.tare)
 
     def __call__(self, x: Sequence[float]) -> float:
         """f(x) = sum H_j^2; BAD_VALUE (logged) if the simulation fails."""
@@ -131,7 +157,7 @@ class IdentificationProblem:
             return f
         except Exception as exc:  # a failed simulation is a bad point, not the end of the run
             log.warning("%s/%s: simulation failed at %s: %s", self.name, self.model,
-                        {SHORT[k]: round(v, 5) for k, v in self.values(x).items()}, exc)
+                        {short(k): round(v, 5) for k, v in self.values(x).items()}, exc)
             return BAD_VALUE
 
 
@@ -158,11 +184,13 @@ FROM_META = {"v_s": "drive.v_ref", "d": "chain.pretension", "mu_d": "wheel.mu_ro
 
 def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, window: Optional[float] = None,
                      fixed: Optional[Mapping[str, object]] = None, settle: float = 4.0,
-                     tolerance: Optional[float] = None) -> IdentificationProblem:
+                     tolerance: Optional[float] = None, tare: bool = False) -> IdentificationProblem:
     """The problem of one loaded measurement (lss_fmu.measurement.Measurement):
     bounds of the layout-dependent variables from its metadata, CoRs 0.2..0.9,
     starting at the nominal values and the middle of the CoR range. `window`
-    keeps only the first seconds of the record (quick runs and tests)."""
+    keeps only the first seconds of the record (quick runs and tests). `tare`:
+    take out zero errors within 3 sigma of the transducer's declared offset
+    (meta.json sensor.force_offset_std_N, else the virtual cart's)."""
     t = np.asarray(meas.time, float)
     t = t - t[0]
     forces = meas.forces.to_numpy(float)
@@ -179,6 +207,16 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
         x0[name] = float(dv.nominal)
     extra = dict(meas.meta.get("fmu_parameters", {}) or {})
     extra.update(fixed or {})
+    tol = tare_of(meas.meta) if tare else None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
-                                 name=meas.id)
+                                 name=meas.id, tare=tol)
+
+
+def tare_of(meta: Optional[Mapping] = None) -> np.ndarray:
+    """3 sigma of the declared zero error per force channel, N."""
+    from lss_fmu.sensor import OFFSET_STD
+    spec = dict(OFFSET_STD)
+    declared = ((meta or {}).get("sensor") or {}).get("force_offset_std_N") or {}
+    spec.update({k: float(v) for k, v in declared.items() if k in spec})
+    return 3.0 * np.array([spec[c] for c in FORCE_CHANNELS])

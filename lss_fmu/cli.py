@@ -80,6 +80,31 @@ def _delegate(module: str, func: str):
     return run
 
 
+# commands whose own parser takes everything after their name
+DELEGATED = {
+    "layouts": ("layouts_cli", "layouts_main", "list, check and draw track layouts"),
+    "rig": ("rig_cli", "rig_main", "synthesise measurements with the virtual transducer cart"),
+    "identify": ("identification.cli", "identify_main", "identify one measurement"),
+    "campaign": ("identification.cli", "campaign_main", "identify all measurements x models"),
+    "report": ("identification.cli", "report_main", "the paper's section 4 from a campaign"),
+    "close-loop": ("identification.cli", "close_loop_main", "residual -> missing effect -> extended model"),
+}
+
+
+def _split_delegated(argv: list[str]):
+    """`lss [--traceback] CMD ARGS...` for a delegated CMD -> (CMD, ARGS, traceback);
+    argparse's REMAINDER would swallow nothing when ARGS starts with an option."""
+    opts = []
+    for i, a in enumerate(argv):
+        if a == "--traceback":
+            opts.append(a)
+            continue
+        if a in DELEGATED:
+            return a, argv[i + 1:], bool(opts)
+        return None
+    return None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="lss", description="Loop-sorter chain FMU: build, simulate, "
                                 "measure, identify contact parameters, close the loop.")
@@ -99,14 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--output", action="append", metavar="NAME", help="record another output")
     s.set_defaults(func=cmd_simulate)
 
-    for name, module, func, help_ in [
-        ("layouts", "layouts_cli", "layouts_main", "list, check and draw track layouts"),
-        ("rig", "rig_cli", "rig_main", "synthesise measurements with the virtual transducer cart"),
-        ("identify", "identification.cli", "identify_main", "identify one measurement"),
-        ("campaign", "identification.cli", "campaign_main", "identify all measurements x models"),
-        ("report", "identification.cli", "report_main", "the paper's section 4 from a campaign"),
-        ("close-loop", "identification.cli", "close_loop_main", "residual -> missing effect -> extended model"),
-    ]:
+    for name, (module, func, help_) in DELEGATED.items():
         d = sub.add_parser(name, help=help_, add_help=False)
         d.add_argument("rest", nargs=argparse.REMAINDER)
         d.set_defaults(func=_delegate(module, func))
@@ -115,8 +133,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    split = _split_delegated(argv)
+    if split is not None:
+        cmd, rest, tb = split
+        args = argparse.Namespace(command=cmd, rest=rest, traceback=tb, func=_delegate(*DELEGATED[cmd][:2]))
+    else:
+        args = build_parser().parse_args(argv)
     show = args.traceback or os.environ.get("LSS_TRACEBACK") == "1"
     try:
         return int(args.func(args) or 0)

@@ -1,0 +1,79 @@
+"""The extended identification: the winning effect switched on, its
+parameters added to the design vector, identified again from the previous
+optimum. The base variables keep their full bounds by default: a missing
+effect can drag the base optimum far (onto a bound), and the extended model
+must be free to walk back."""
+from __future__ import annotations
+
+import dataclasses
+import numpy as np
+
+from .attribution import HypothesisScore
+from .catalogue import CATALOGUE, SENSOR_CH, Extension, SensorError
+from .problem import IdentificationProblem
+
+BASE_RANGE = 1.0   # of each base variable's bound range, centred on the previous optimum (1: all of it)
+
+
+def extension_of(score: HypothesisScore) -> Extension:
+    effect = CATALOGUE[score.effect]
+    if isinstance(effect, SensorError):
+        return effect.extension(score.hypothesis, score.coef, effect.select(score.coef, score.probe_gain))
+    return effect.extension(score.hypothesis, score.coef)
+
+
+def extended_problem(problem: IdentificationProblem, x: np.ndarray, ext: Extension) -> IdentificationProblem:
+    """The problem with the effect's parameters free, started at x (base) and
+    the fitted effect values."""
+    bounds = dict(problem.bounds)
+    values = problem.values(x)
+    for name in problem.free if BASE_RANGE < 1.0 else ():
+        lo, hi = problem.bounds[name]
+        half = 0.5 * BASE_RANGE * (hi - lo)
+        v = values[name]
+        bounds[name] = (max(lo, v - half), min(hi, v + half))
+        if bounds[name][0] >= bounds[name][1]:
+            bounds[name] = (lo, hi)
+    x0 = dict(values)
+    for name, (lo, hi) in ext.free.items():
+        bounds[name] = (lo, hi)
+        x0[name] = float(np.clip(ext.x0[name], lo, hi))
+    fixed = {**problem.fixed, **ext.fixed}
+    tare = _tare_without_free_offsets(problem, x, ext, x0)
+    return dataclasses.replace(problem, bounds=bounds, fixed=fixed, free=tuple(problem.free) + tuple(ext.free),
+                               x0=x0, tare=tare)
+
+
+def _tare_without_free_offsets(problem: IdentificationProblem, x: np.ndarray, ext: Extension, x0: dict):
+    """A channel whose offset the extension identifies loses its tare: the
+    offset parameter now explains the whole zero error, in-specification part
+    included (else the identified offset would fall short by what the tare
+    took). Its start value gets that part back (x0 is updated in place)."""
+    if problem.tare is None:
+        return None
+    freed = [j for j, ch in enumerate(SENSOR_CH) if f"effects.sensor.offset.{ch}" in ext.free]
+    if not freed:
+        return problem.tare
+    mean_r = (problem.samples - problem.simulate(x)).mean(axis=0)
+    taken = np.clip(mean_r, -problem.tare, problem.tare)
+    tare = np.array(problem.tare, float)
+    for j in freed:
+        name = f"effects.sensor.offset.{SENSOR_CH[j]}"
+        lo, hi = ext.free[name]
+        x0[name] = float(np.clip(x0[name] + taken[j], lo, hi))
+        tare[j] = 0.0
+    return tare
+
+
+def frozen_problem(base: IdentificationProblem, extended: IdentificationProblem, x: np.ndarray
+                   ) -> IdentificationProblem:
+    """After a round: the found effect's identified values become fixed FMU
+    values of the base problem (original bounds, started at the extended
+    optimum), ready for the next round of attribution."""
+    values = extended.values(x)
+    effect_values = {n: values[n] for n in extended.free if n.startswith("effects.")}
+    x0 = {k: v for k, v in values.items() if not k.startswith("effects.")}
+    for name in base.free:
+        lo, hi = base.bounds[name]
+        x0[name] = float(np.clip(x0[name], lo, hi))
+    return dataclasses.replace(base, fixed={**extended.fixed, **effect_values}, x0=x0, tare=extended.tare)
