@@ -145,7 +145,12 @@ static fmi2Status build_chain(Instance *in) {
     if (in->tolerance_defined) p.solver_tolerance = in->tolerance;
     Chain *c = chain_create(&p, in->has_resources ? in->resource_dir : NULL, &in->alloc, err, sizeof err);
     if (!c) {
-        LOG_ERROR(in, "cannot build the chain: %s", err);
+        /* a parse error names the file already; a chain that cannot be assembled on a
+           well-formed layout must still say which layout */
+        if (strstr(err, p.layout_name))
+            LOG_ERROR(in, "cannot build the chain: %s", err);
+        else
+            LOG_ERROR(in, "cannot build the chain: %s (layout.name = '%s')", err, p.layout_name);
         return fmi2Error;
     }
     chain_free(in->chain);

@@ -19,7 +19,7 @@ from ctypes import POINTER, byref, c_char, c_char_p, c_double, c_int, c_size_t, 
 
 import pytest
 from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2ValueReference
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from fmi_util import DISCARD, ERROR, OK, STATUS_NAME, WARNING, Slave, model_description, var, vr
@@ -559,6 +559,9 @@ def layout_slave(tmp_path_factory):
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                    HealthCheck.too_slow])
 @given(text=layout_texts())
+# found by hypothesis: well formed, but 12 carts cannot be assembled on the loop (the message must name it)
+@example(text=b"carts 12\nwheel A\ncoupling A\nmotors 2\nstraight 10\ncurve 3 180 left\nstraight 10\n"
+              b"curve 3 180 left")
 def test_random_layout_files_through_the_fmu(layout_slave, text):
     s = layout_slave
     path = s.dir / "random.layout"
