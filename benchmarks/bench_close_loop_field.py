@@ -50,7 +50,8 @@ def main(argv=None) -> int:
     work = Path(args.work)
     data = work / "field"
     numbers = parse_numbers(args.measurements)
-    generate_set("field", data, numbers, workers=args.workers, lap_seconds=args.lap_seconds, progress=False)
+    if not all((data / folder_name(n) / "meta.json").is_file() for n in numbers):  # made once, then reused
+        generate_set("field", data, numbers, workers=args.workers, lap_seconds=args.lap_seconds, progress=False)
     rows = []
     for n in numbers:
         folder = data / folder_name(n)

@@ -31,7 +31,7 @@ from lss_fmu.atomic import write_json_atomic
 
 from .attribution import Attribution, attribute, simulate_with
 from .catalogue import CATALOGUE, Context
-from .extension import extended_problem, extension_of, frozen_problem
+from .extension import extended_problem, extension_of
 from .identify import identify
 from .problem import IdentificationProblem, nrmsd, tare_of, tared
 
@@ -216,8 +216,12 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
         if not rnd.confirmed:
             break
         remaining.remove(rnd.effect)
-        base = frozen_problem(base, rnd.problem_extended, rnd.x_extended)
-        x = np.array([base.x0[n] for n in base.free])
+        # the next round's base is the extended model, the found effect still free: a second
+        # effect in the data distorts the first one's fit, and with its parameters in the base
+        # Jacobian the attribution scores the next effect beyond what refitting it could do;
+        # the next extension then identifies both together
+        base = dataclasses.replace(rnd.problem_extended, x0=rnd.problem_extended.values(rnd.x_extended))
+        x = np.asarray(rnd.x_extended, float)
         done.append(rnd.effect)
     return CloseLoopResult(problem, np.asarray(x_base, float), result_rounds, time.time() - t0)
 

@@ -36,12 +36,28 @@ def extended_problem(problem: IdentificationProblem, x: np.ndarray, ext: Extensi
             bounds[name] = (lo, hi)
     x0 = dict(values)
     for name, (lo, hi) in ext.free.items():
+        lo, hi = _within_fmu_range(name, lo, hi)
         bounds[name] = (lo, hi)
         x0[name] = float(np.clip(ext.x0[name], lo, hi))
     fixed = {**problem.fixed, **ext.fixed}
     tare = _tare_without_free_offsets(problem, x, ext, x0)
     return dataclasses.replace(problem, bounds=bounds, fixed=fixed, free=tuple(problem.free) + tuple(ext.free),
                                x0=x0, tare=tare)
+
+
+def _within_fmu_range(name: str, lo: float, hi: float) -> tuple:
+    """The bounds cut to the FMU variable's declared range: a design point
+    outside it is refused by the FMU (a failed simulation, not a bad fit)."""
+    from lss_fmu.variables import BY_NAME
+    var = BY_NAME.get(name)
+    if var is not None:
+        if var.min is not None:
+            lo = max(lo, float(var.min))
+        if var.max is not None:
+            hi = min(hi, float(var.max))
+    if not lo < hi:
+        raise ValueError(f"{name}: no room within the FMU's range for the bounds [{lo}, {hi}]")
+    return lo, hi
 
 
 def _tare_without_free_offsets(problem: IdentificationProblem, x: np.ndarray, ext: Extension, x0: dict):
@@ -63,17 +79,3 @@ def _tare_without_free_offsets(problem: IdentificationProblem, x: np.ndarray, ex
         x0[name] = float(np.clip(x0[name] + taken[j], lo, hi))
         tare[j] = 0.0
     return tare
-
-
-def frozen_problem(base: IdentificationProblem, extended: IdentificationProblem, x: np.ndarray
-                   ) -> IdentificationProblem:
-    """After a round: the found effect's identified values become fixed FMU
-    values of the base problem (original bounds, started at the extended
-    optimum), ready for the next round of attribution."""
-    values = extended.values(x)
-    effect_values = {n: values[n] for n in extended.free if n.startswith("effects.")}
-    x0 = {k: v for k, v in values.items() if not k.startswith("effects.")}
-    for name in base.free:
-        lo, hi = base.bounds[name]
-        x0[name] = float(np.clip(x0[name], lo, hi))
-    return dataclasses.replace(base, fixed={**extended.fixed, **effect_values}, x0=x0, tare=extended.tare)
