@@ -29,7 +29,8 @@ def ranking_figure(rnd, path: Path, threshold: float) -> Path:
     ax.barh(y - 0.2, [100 * (r.share_fit or 0.0) for r in rk][::-1], 0.4, color="tab:orange",
             label="fitted through the FMU (top candidates)")
     ax.set_yticks(y, names, fontsize=8)
-    ax.axvline(100 * threshold, color="tab:red", ls="--", lw=1, label=f"significance {100 * threshold:.0f}%")
+    ax.axvline(100 * threshold, color="tab:red", ls="--", lw=1,
+               label=f"candidate threshold {100 * threshold:.0f}% (either estimate)")
     ax.set_xlabel("share of the objective f explained, %")
     ax.set_title(f"Round {rnd.number}: attribution of the residual (f = {rnd.f_base:.4g})")
     ax.legend(fontsize=7, loc="lower right")
