@@ -14,6 +14,7 @@ chain is chaotic (docs/identification.md).
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from lss_fmu.atomic import write_json_atomic
@@ -48,7 +49,7 @@ def run_close_loop_stage(out: Path) -> list[str]:
             f"| amplitude ({eff.unit}) | {true_amp:.4g} | "
             f"{'-' if rnd.amplitude is None else f'{rnd.amplitude:.4g}'} |"]
     for k, v in sorted(truth.items()):
-        rows.append(f"| `{k}` | {v:.4g} | {rnd.identified.get(k, float('nan')):.4g} |")
+        rows.append(f"| `{k}` | {_show(k, v)} | {_show(k, rnd.identified.get(k))} |")
     f_ext = "-" if rnd.f_extended is None else f"{rnd.f_extended:.4g}"
     return [
         "## Closing the loop\n",
@@ -63,3 +64,12 @@ def run_close_loop_stage(out: Path) -> list[str]:
         f"({report.relative_to(out)}).\n",
         f"![attribution](close_loop/round{rnd.number}_attribution.png)\n",
     ]
+
+
+def _show(name: str, value) -> str:
+    """A table cell: '-' for a value not identified, phases in [0, 2 pi)."""
+    if value is None:
+        return "-"
+    if "phase" in name:
+        value = math.fmod(float(value), 2 * math.pi) % (2 * math.pi)
+    return f"{value:.4g}"
