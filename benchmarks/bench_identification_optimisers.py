@@ -120,19 +120,9 @@ def pin_fmu(workdir: Path) -> dict:
 
 
 def release_problem() -> IdentificationProblem:
-    """Layout 7, LW, the first 0.6 s after the trigger right behind the start:
-    the measurement is the model at the truth plus the sensor model's noise
-    (as the `release_problem` fixture of tests/test_identification.py)."""
-    from lss_fmu.sensor import NOISE_STD
-    from lss_fmu.variables import FORCE_CHANNELS
-    times = np.arange(0, 0.6, 1 / 300)
-    x0 = {**TRUTH, **{k: 0.55 for k in CORS}}
-    p = IdentificationProblem(np.zeros((len(times), 7)), times, "layout7", "LW",
-                              {k: (0.2, 0.9) for k in CORS}, fixed=FIXED, free=CORS, x0=x0, settle=0.02)
-    clean = p.simulate([TRUTH[k] for k in CORS])
-    noise = np.random.default_rng(1).normal(size=clean.shape) * [NOISE_STD[c] for c in FORCE_CHANNELS]
-    p.samples = clean + noise
-    return p
+    """The test's release transient (identification.synthetic.release_problem)."""
+    from identification.synthetic import release_problem as make
+    return make()
 
 
 # --------------------------------------------------------------------------

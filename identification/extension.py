@@ -1,6 +1,6 @@
 """The extended identification: the winning effect switched on, its
 parameters added to the design vector, identified again from the previous
-optimum. The base variables keep their full bounds by default: a missing
+optimum. The base variables keep their full bounds: a missing
 effect can drag the base optimum far (onto a bound), and the extended model
 must be free to walk back."""
 from __future__ import annotations
@@ -11,8 +11,6 @@ import numpy as np
 from .attribution import HypothesisScore
 from .catalogue import CATALOGUE, SENSOR_CH, Extension, SensorError
 from .problem import IdentificationProblem
-
-BASE_RANGE = 1.0   # of each base variable's bound range, centred on the previous optimum (1: all of it)
 
 
 def extension_of(score: HypothesisScore) -> Extension:
@@ -25,15 +23,8 @@ def extension_of(score: HypothesisScore) -> Extension:
 def extended_problem(problem: IdentificationProblem, x: np.ndarray, ext: Extension) -> IdentificationProblem:
     """The problem with the effect's parameters free, started at x (base) and
     the fitted effect values."""
-    bounds = dict(problem.bounds)
+    bounds = dict(problem.bounds)   # the base variables keep their full bounds (module docstring)
     values = problem.values(x)
-    for name in problem.free if BASE_RANGE < 1.0 else ():
-        lo, hi = problem.bounds[name]
-        half = 0.5 * BASE_RANGE * (hi - lo)
-        v = values[name]
-        bounds[name] = (max(lo, v - half), min(hi, v + half))
-        if bounds[name][0] >= bounds[name][1]:
-            bounds[name] = (lo, hi)
     x0 = dict(values)
     for name, (lo, hi) in ext.free.items():
         lo, hi = _within_fmu_range(name, lo, hi)

@@ -42,6 +42,22 @@ def transducer_before(s_target: float, lead: float = 0.5) -> tuple:
     return i, float(sim.get("transducer.s")) + 0.05
 
 
+def release_problem(window: float = 0.6, s_m: float = 0.3, noise_seed: int = 1) -> IdentificationProblem:
+    """Layout 7, LW, the first `window` s after the trigger at `s_m`, right behind
+    the start: the model at the truth (Table 3, row 1) plus the sensor model's
+    noise, no offsets, no tare. The recovery tests and the optimiser benchmark
+    identify the four CoRs on it."""
+    times = np.arange(0, window, 1 / 300)
+    truth = {**TRUTH, "trigger.s_M": s_m}
+    x0 = {**truth, **{k: 0.55 for k in CORS}}
+    p = IdentificationProblem(np.zeros((len(times), 7)), times, LAYOUT, "LW", {k: (0.2, 0.9) for k in CORS},
+                              fixed=FIXED, free=CORS, x0=x0, settle=SETTLE)
+    clean = p.simulate([truth[k] for k in CORS])
+    noise = np.random.default_rng(noise_seed).normal(size=clean.shape) * [NOISE_STD[c] for c in FORCE_CHANNELS]
+    p.samples = clean + noise
+    return p
+
+
 def make_problem(effect_params: dict, seed: int, *, transducer: int = 0, s_m: float = 0.05,
                  artefact: dict | None = None, offsets: bool = True) -> tuple:
     """(problem, truth_x): the measurement simulated with `effect_params`, the

@@ -40,6 +40,12 @@ class Var:
 
 P, CP, IN, OUT = "parameter", "calculatedParameter", "input", "output"
 
+FORCE_CHANNELS = [
+    "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
+    "transducer.steering.F_left", "transducer.steering.F_right",
+    "transducer.driving.F_left", "transducer.driving.F_right",
+]
+
 VARIABLES: list[Var] = [
     # --- layout and configuration -------------------------------------------------
     Var("layout.name", "String", P, "fixed",
@@ -167,15 +173,9 @@ VARIABLES: list[Var] = [
         "quadratic (air drag) running resistance per cart", "N.s2/m2", 0.0, 0.0),
     *[Var(f"effects.sensor.gain.{ch[len('transducer.'):]}", "Real", P, "fixed",
           f"relative gain error g of the {ch} channel: output = (1+g) F + o, in (-0.5, 0.5)",
-          "1", 0.0, -0.5, 0.5) for ch in (
-        "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
-        "transducer.steering.F_left", "transducer.steering.F_right",
-        "transducer.driving.F_left", "transducer.driving.F_right")],
+          "1", 0.0, -0.5, 0.5) for ch in FORCE_CHANNELS],
     *[Var(f"effects.sensor.offset.{ch[len('transducer.'):]}", "Real", P, "fixed",
-          f"offset o of the {ch} channel: output = (1+g) F + o", "N", 0.0, -1e4, 1e4) for ch in (
-        "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
-        "transducer.steering.F_left", "transducer.steering.F_right",
-        "transducer.driving.F_left", "transducer.driving.F_right")],
+          f"offset o of the {ch} channel: output = (1+g) F + o", "N", 0.0, -1e4, 1e4) for ch in FORCE_CHANNELS],
     Var("effects.mass.transducer_factor", "Real", P, "fixed",
         "the transducer cart's mass and inertia times this factor (on top of cart.mass_factor), in (0.2, 5]",
         "1", 1.0, 0.2, 5.0),
@@ -197,11 +197,6 @@ def value_reference(name: str) -> int:
 
 
 CONTACT_MODELS = {"HC": 1, "HW": 2, "LW": 3, "LN": 4, "GZ": 5, "FL": 6}
-FORCE_CHANNELS = [
-    "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
-    "transducer.steering.F_left", "transducer.steering.F_right",
-    "transducer.driving.F_left", "transducer.driving.F_right",
-]
 SPEED_CHANNELS = [
     "transducer.wheel.w_sl", "transducer.wheel.w_sr",
     "transducer.wheel.w_dl", "transducer.wheel.w_dr",

@@ -20,7 +20,6 @@ import pytest
 from identification.identify import identify
 from identification.problem import DESIGN, IdentificationProblem
 from identification.profile import noise_floor, profile
-from lss_fmu.sensor import NOISE_STD
 from lss_fmu.variables import FORCE_CHANNELS
 
 CORS = DESIGN[:4]
@@ -34,15 +33,9 @@ FIXED = {"track.guide_gap": -0.0003}
 def release_problem(fmu_file):
     """Layout 7, LW, the first 0.6 s after the trigger right behind the
     start: the measurement is the model at the truth (Table 3, row 1) plus
-    the sensor model's noise."""
-    times = np.arange(0, 0.6, 1 / 300)
-    x0 = {**TRUTH, **{k: 0.55 for k in CORS}}
-    p = IdentificationProblem(np.zeros((len(times), 7)), times, "layout7", "LW",
-                              {k: (0.2, 0.9) for k in CORS}, fixed=FIXED, free=CORS, x0=x0, settle=0.02)
-    clean = p.simulate([TRUTH[k] for k in CORS])
-    noise = np.random.default_rng(1).normal(size=clean.shape) * [NOISE_STD[c] for c in FORCE_CHANNELS]
-    p.samples = clean + noise
-    return p
+    the sensor model's noise (identification.synthetic)."""
+    from identification.synthetic import release_problem as make
+    return make()
 
 
 def test_recovery_from_the_release_transient(release_problem):
