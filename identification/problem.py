@@ -207,10 +207,24 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
         x0[name] = float(dv.nominal)
     extra = dict(meas.meta.get("fmu_parameters", {}) or {})
     extra.update(fixed or {})
+    if "chain.transducer" not in extra:
+        extra["chain.transducer"] = transducer_for(
+            meas.track, float(x0.get("trigger.s_M", meas.meta["trigger_point"])),
+            float(x0.get("drive.v_ref", meas.meta["speed_nominal"])), settle)
     tol = tare_of(meas.meta) if tare else None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
                                  name=meas.id, tare=tol)
+
+
+def transducer_for(track, s_m: float, v: float, settle: float) -> int:
+    """The cart that passes s_M 1.5 s after settling at the nominal speed (not
+    before 1 s, so that s_M and v_s anywhere within their bounds still come
+    after it): every evaluation then simulates settle + ~1.5 s + the record,
+    not up to a lap more (layout 3: 300-450 s)."""
+    from lss_fmu.triggered import arriving_cart
+    return arriving_cart(float(track.length), int(track.n_carts), s_m, max(abs(v), 0.1), settle + 1.5,
+                         earliest=settle + 1.0)[0]
 
 
 def tare_of(meta: Optional[Mapping] = None) -> np.ndarray:

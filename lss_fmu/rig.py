@@ -54,6 +54,7 @@ from . import rig_effects as E
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
 from .layouts import TABLE2, load_track
 from .sensor import CHANNELS, S_CHANNEL, SensorModel
+from .triggered import arriving_cart
 from .variables import BY_NAME, CONTACT_MODELS
 
 SETS = ("recovery", "field")
@@ -323,13 +324,7 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
     track = load_track(layout_fmu if set_name == "field" and layout_fmu != layout else layout)
     L, N = float(track.length), int(track.n_carts)
     # the transducer cart: the one that reaches s_M about `arrival` s after the start
-    pitch = L / N
-    target = (s_M - v * arrival) % L
-    idx = int(round(target / pitch)) % N
-    arrival = ((s_M - idx * pitch) % L) / v
-    if arrival < SETTLE_TIME + 0.3:  # rounding brought it too early: the next cart behind
-        idx = (idx - 1) % N
-        arrival = ((s_M - idx * pitch) % L) / v
+    idx, arrival = arriving_cart(L, N, s_M, v, arrival, earliest=SETTLE_TIME + 0.3)
     log = (L / v) * (1.0 + SPEED_MARGIN) if lap_seconds is None else float(lap_seconds)
     stop = arrival + log + END_MARGIN
     params.update({

@@ -18,6 +18,23 @@ from .runner import ChainSimulator, SimulationError
 from .variables import FORCE_CHANNELS
 
 
+def arriving_cart(length: float, n_carts: int, s_m: float, v: float, arrival: float,
+                  earliest: float) -> tuple[int, float]:
+    """(index, arrival time) of the cart that passes s_m about `arrival` s
+    after the start at speed v, and not before `earliest` s; cart i starts at
+    i * length / n_carts (the FMU's assembly). Once the chain has settled it
+    does not matter which cart carries the transducer, so a simulation picks
+    the one that reaches the trigger soon after settling instead of running
+    up to a lap first."""
+    pitch = length / n_carts
+    idx = int(round(((s_m - v * arrival) % length) / pitch)) % n_carts
+    t = ((s_m - idx * pitch) % length) / v
+    if t < earliest:  # rounding brought it too early: the next cart behind
+        idx = (idx - 1) % n_carts
+        t = ((s_m - idx * pitch) % length) / v
+    return idx, t
+
+
 def crossing_fraction(s_prev: float, s_cur: float, s_m: float, length: float) -> float | None:
     """Fraction in [0, 1) of the step s_prev -> s_cur at which the cart passes
     s_m moving forward (arc lengths wrap at `length`), or None."""
