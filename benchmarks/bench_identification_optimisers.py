@@ -71,6 +71,8 @@ TRUTH = {"contact.e_JA": 0.46, "contact.e_JR": 0.558, "contact.e_SW": 0.351, "co
 FIXED = {"track.guide_gap": -0.0003}
 SHORT_COR = {"contact.e_JA": "e_JA", "contact.e_JR": "e_JR", "contact.e_SW": "e_SW", "contact.e_RW": "e_RW"}
 IDENTIFIABLE = ("contact.e_JA", "contact.e_SW", "contact.e_RW")  # e_JR is below the noise (docs/identification.md)
+# convergence targets, as multiples of the noise floor f(truth): evaluations until the best f is below
+TARGETS = (20.0, 5.0, 2.0)
 
 
 # --------------------------------------------------------------------------
@@ -141,9 +143,16 @@ def _best_at(f_trace: np.ndarray, marks: list[int]) -> dict:
     return {str(m): (float(best[min(m, f.size) - 1]) if f.size else None) for m in marks}
 
 
-def run_one(method: str, problem: IdentificationProblem, budget: int, seed: int) -> dict:
+def evals_to(f_trace: np.ndarray, level: float) -> int | None:
+    """1-based count of used evaluations until the best f is at or below `level`."""
+    hit = np.flatnonzero(np.where(np.isfinite(f_trace), f_trace, np.inf) <= level)
+    return int(hit[0]) + 1 if hit.size else None
+
+
+def run_one(method: str, problem: IdentificationProblem, budget: int, seed: int,
+            f_truth: float | None = None) -> dict:
     truth = np.array([TRUTH[k] for k in CORS])
-    marks = sorted({50, 100, 200, budget})
+    marks = sorted({100, 300, 500, budget})
     w0, c0 = time.perf_counter(), _cpu()
     if method in ("complex-rf", "complex-rfp"):
         from identification.identify import identify
@@ -166,7 +175,9 @@ def run_one(method: str, problem: IdentificationProblem, budget: int, seed: int)
     return {"method": method, "seed": int(seed), "budget": int(budget), "f": f,
             "x": {SHORT_COR[k]: float(v) for k, v in zip(CORS, x)}, "error": err,
             "max_abs_error_identifiable": float(max(abs(err[SHORT_COR[k]]) for k in IDENTIFIABLE)),
-            "best_f_after": _best_at(trace, marks), "wall_s": wall, "cpu_s": cpu, **info}
+            "best_f_after": _best_at(trace, marks), "wall_s": wall, "cpu_s": cpu,
+            "evals_to": ({} if f_truth is None else
+                         {f"{k:g}": evals_to(trace, k * f_truth) for k in TARGETS}), **info}
 
 
 def time_one_evaluation(problem: IdentificationProblem, n: int = 3) -> float:
@@ -221,8 +232,19 @@ def summarize(runs: list[dict]) -> dict:
                               else None),
             "wall_s_median": float(np.median([r["wall_s"] for r in rs])),
             "cpu_s_median": float(np.median([r["cpu_s"] for r in rs])),
+            "evals_to": {k: _spread([r.get("evals_to", {}).get(k) for r in rs]) for k in
+                         (rs[0].get("evals_to") or {})},
         }
     return out
+
+
+def _spread(values: list) -> dict:
+    """Reached count, median and interquartile range of the runs that reached."""
+    hit = [v for v in values if v is not None]
+    if not hit:
+        return {"reached": 0, "runs": len(values), "median": None, "q1": None, "q3": None}
+    q1, med, q3 = np.percentile(hit, [25, 50, 75])
+    return {"reached": len(hit), "runs": len(values), "median": float(med), "q1": float(q1), "q3": float(q3)}
 
 
 def _stop(message) -> str:
@@ -283,6 +305,22 @@ def doc_section(data: dict) -> str:
                      f"{'-' if v.get('rounds_median') is None else format(v['rounds_median'], '.0f')} | "
                      f"{v['wall_s_median']:.0f} | "
                      f"{v['cpu_s_median']:.0f} |")
+    targets = list(next(iter(summ.values()), {}).get("evals_to", {}))
+    if targets:
+        lines += [
+            "", "**Evaluations to converge**: used evaluations until the best f first falls to a multiple "
+            "of the noise floor f(truth); runs that reached it / all runs, then the median and "
+            "interquartile range over the runs that reached it (none: '-').", "",
+            "| method | " + " | ".join(f"f <= {k} x f(truth)" for k in targets) + " |",
+            "|---|" + "---|" * len(targets),
+        ]
+        for m, v in summ.items():
+            cells = []
+            for k in targets:
+                e = v["evals_to"][k]
+                cells.append(f"{e['reached']}/{e['runs']}" + ("" if e["median"] is None else
+                             f": {e['median']:.0f} [{e['q1']:.0f}-{e['q3']:.0f}]"))
+            lines.append(f"| {m} | " + " | ".join(cells) + " |")
     marks = list(runs[0]["best_f_after"]) if runs else []
     lines += [
         "", "Every run: the distance of each CoR from the truth (identified minus true), the best f "
@@ -358,7 +396,7 @@ def main(argv: list[str] | None = None) -> int:
         runs = []
         for seed in range(n_seeds):
             for m in methods:
-                r = run_one(m, problem, budget, seed)
+                r = run_one(m, problem, budget, seed, f_truth)
                 runs.append(r)
                 e = r["error"]
                 print(f"{m:12s} seed {seed}: f {r['f']:.4g}  e_JA {e['e_JA']:+.3f} e_SW {e['e_SW']:+.3f} "
