@@ -50,6 +50,8 @@ def identify_main(argv: list[str]) -> int:
     ap.add_argument("--free", default=None, help="design variables to identify, e.g. e_JA,e_JR,e_SW,e_RW "
                     "(default: all ten of Eq. 13)")
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
+    ap.add_argument("--tare", action="store_true",
+                    help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
     args = ap.parse_args(argv)
 
@@ -62,7 +64,7 @@ def identify_main(argv: list[str]) -> int:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
     model = _model(args.model)
     meas = load_measurement(args.measurement)
-    problem = from_measurement(meas, model, free=_free(args.free), window=args.window)
+    problem = from_measurement(meas, model, free=_free(args.free), window=args.window, tare=args.tare)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",

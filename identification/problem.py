@@ -83,6 +83,7 @@ class IdentificationProblem:
     tolerance: Optional[float] = None
     name: str = "measurement"
     tare: Optional[np.ndarray] = None    # per force channel, N: zero tolerance taken out (None: Eq. 10-12 as is)
+    anti_alias: Optional[tuple] = None   # (order, cutoff Hz, causal): the logger's Butterworth filter, if declared
 
     def __post_init__(self):
         if self.model not in CONTACT_MODELS:
@@ -141,8 +142,30 @@ class IdentificationProblem:
         """The 7 simulated forces at the measured sample times (raises on failure)."""
         from lss_fmu.triggered import simulate_triggered
         params, s_m = self.fmu_params(x)
-        return simulate_triggered(simulator(), params, s_m, self.times, settle=self.settle,
-                                  tolerance=self.tolerance)
+        if self.anti_alias is None:
+            return simulate_triggered(simulator(), params, s_m, self.times, settle=self.settle,
+                                      tolerance=self.tolerance)
+        return self._through_filter(simulate_triggered, params, s_m)
+
+    def _through_filter(self, simulate_triggered, params: dict, s_m: float) -> np.ndarray:
+        """The simulation through the logger's declared anti-alias filter: on the
+        communication grid (half the sample spacing) from FILTER_LEAD s before
+        the trigger, so that the filter's 4 ms of group delay is in the model and
+        not in the residual."""
+        from scipy import signal
+        from scipy.interpolate import CubicSpline
+        order, cutoff, causal = self.anti_alias
+        dt = float(np.median(np.diff(self.times))) if len(self.times) > 1 else 1.0 / 300.0
+        h = dt / 2.0
+        grid = np.arange(-FILTER_LEAD, self.times[-1] + h, h)
+        y = simulate_triggered(simulator(), params, s_m, grid, settle=self.settle, tolerance=self.tolerance,
+                               step=h, history=FILTER_LEAD + 2 * h)
+        sos = signal.butter(int(order), float(cutoff), btype="low", output="sos", fs=1.0 / h)
+        if causal:
+            y, _ = signal.sosfilt(sos, y, axis=0, zi=signal.sosfilt_zi(sos)[:, :, None] * y[0])
+        else:
+            y = signal.sosfiltfilt(sos, y, axis=0)
+        return CubicSpline(grid, y, axis=0)(self.times)
 
     def channel_errors(self, x: Sequence[float]) -> np.ndarray:
         return nrmsd(self.samples, self.simulate(x), self.tare)
@@ -212,9 +235,30 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
             meas.track, float(x0.get("trigger.s_M", meas.meta["trigger_point"])),
             float(x0.get("drive.v_ref", meas.meta["speed_nominal"])), settle)
     tol = tare_of(meas.meta) if tare else None
+    aa = anti_alias_of(meas.meta)
+    if aa is not None and len(t) > 1 and aa[1] >= 0.99 / float(np.median(np.diff(t))):
+        log.warning("%s: anti-alias filter at %g Hz is not below the sample rate; not modelled", meas.id, aa[1])
+        aa = None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
-                                 name=meas.id, tare=tol)
+                                 name=meas.id, tare=tol, anti_alias=aa)
+
+
+FILTER_LEAD = 0.05   # s of simulated history before the trigger for the anti-alias filter (~12 time constants)
+
+
+def anti_alias_of(meta: Optional[Mapping]) -> Optional[tuple]:
+    """(order, cutoff Hz, causal) from meta.json's sensor.anti_alias_filter,
+    written as "Butterworth, order 4, 100 Hz, causal"; None if not declared so."""
+    import re
+    text = str(((meta or {}).get("sensor") or {}).get("anti_alias_filter") or "")
+    m = re.search(r"butterworth.*?order\s*(\d+).*?([0-9.]+)\s*hz", text, re.IGNORECASE)
+    if not m:
+        return None
+    order, cutoff = int(m.group(1)), float(m.group(2))
+    if not (1 <= order <= 10 and cutoff > 0):
+        raise ValueError(f"sensor.anti_alias_filter {text!r}: order 1-10 and a positive cutoff expected")
+    return order, cutoff, "zero-phase" not in text.lower()
 
 
 def transducer_for(track, s_m: float, v: float, settle: float) -> int:

@@ -9,6 +9,7 @@ as fine as the samples.
 """
 from __future__ import annotations
 
+from collections import deque
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -50,12 +51,17 @@ def crossing_fraction(s_prev: float, s_cur: float, s_m: float, length: float) ->
 def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: float,
                        sample_times: np.ndarray, settle: float = 3.0,
                        channels: Sequence[str] = FORCE_CHANNELS, max_wait: float | None = None,
-                       tolerance: float | None = None) -> np.ndarray:
+                       tolerance: float | None = None, step: float | None = None,
+                       history: float = 0.0) -> np.ndarray:
     """Outputs `channels` at `sample_times` (s after the trigger crossing) as an
-    array (len(sample_times), len(channels)). Raises SimulationError if the
-    run fails or the cart never reaches s_m within `max_wait` after settling."""
+    array (len(sample_times), len(channels)). The communication step is
+    `step`, by default half the sample spacing; `history` s before the crossing
+    are kept too, so that sample times down to -history can be asked for.
+    Raises SimulationError if the run fails or the cart never reaches s_m
+    within `max_wait` after settling."""
     dt = float(np.median(np.diff(sample_times))) if len(sample_times) > 1 else 1.0 / 300.0
-    h = dt / 2.0
+    h = dt / 2.0 if step is None else float(step)
+    past = deque(maxlen=int(np.ceil(history / h)) + 1 if history > 0 else 0)
     duration = float(sample_times[-1]) + 2 * h
     sim.start(params, tolerance=tolerance)
     length = float(sim.get("track.length"))
@@ -83,8 +89,12 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
         t = sim.time
         s_cur = fmu.getReal([vr_s])[0]
         frac = crossing_fraction(s_prev, s_cur, s_m, length)
-        if frac is not None:
+        if frac is None:
+            past.append((t - h, prev_vals))
+        else:
             t_cross = t - h + frac * h
+            times.extend(tp for tp, _ in past)
+            rows.extend(v for _, v in past)
             rows.append(prev_vals)
             times.append(t - h)
             rows.append(fmu.getReal(vrs))
