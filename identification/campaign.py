@@ -37,6 +37,7 @@ class Task:
     settle: float
     free: Optional[tuple]
     tare: bool = False   # take out zero errors within the transducer's declared offset (from_measurement)
+    restarts: int = 0    # identify(restarts=...)
 
     @property
     def key(self) -> str:
@@ -60,7 +61,8 @@ def run_task(task: Task) -> dict:
     problem = from_measurement(meas, task.model, free=task.free, window=task.window, settle=task.settle,
                                tare=task.tare)
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
-    res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path, progress=False)
+    res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path, progress=False,
+                   restarts=task.restarts)
     out = res.to_dict()
     out.update({"wheel_type": meas.meta.get("wheel_type"), "coupling_type": meas.meta.get("coupling_type"),
                 "number": meas.meta.get("number"), "measurement_dir": str(task.measurement)})
@@ -81,7 +83,7 @@ def find_measurements(data_dir: Path) -> list[Path]:
 def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: int = 2,
                  scheduler: Optional[str] = None, max_evals: int = 5000, seed: int = 0,
                  window: Optional[float] = None, settle: float = 4.0, free: Optional[tuple] = None,
-                 progress: bool = True, client=None, tare: bool = False) -> list[dict]:
+                 progress: bool = True, client=None, tare: bool = False, restarts: int = 0) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
     from lss_fmu.variables import CONTACT_MODELS
     for m in models:
@@ -89,12 +91,14 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
             raise ValueError(f"unknown contact model {m!r}: use one of {', '.join(CONTACT_MODELS)}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare)
+    if int(restarts) < 0:
+        raise ValueError(f"restarts = {restarts}: must be 0 or more")
+    tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts))
              for p in find_measurements(data_dir) for m in models]
     write_json_atomic(out / "campaign.json", {"data_dir": str(data_dir), "models": list(models),
                                               "max_evals": max_evals, "seed": seed, "window": window,
                                               "settle": settle, "free": list(free) if free else None,
-                                              "tare": tare,
+                                              "tare": tare, "restarts": int(restarts),
                                               "tasks": [t.key for t in tasks]})
     todo = [t for t in tasks if not t.result_path.exists()]
     bar = None
@@ -140,6 +144,8 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of each record")
     ap.add_argument("--settle", type=float, default=4.0, help="simulated settling before the trigger is armed, s")
     ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
+    ap.add_argument("--restarts", type=int, default=0,
+                    help="restart a converged complex around the best point up to N times (0: as published)")
     ap.add_argument("--tare", action="store_true",
                     help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
@@ -150,7 +156,7 @@ def main(argv: list[str]) -> int:
     results = run_campaign(Path(args.data_dir), models, Path(args.out), workers=args.workers,
                            scheduler=args.scheduler, max_evals=args.max_evals, seed=args.seed,
                            window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
-                           tare=args.tare)
+                           tare=args.tare, restarts=args.restarts)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

@@ -50,6 +50,8 @@ def identify_main(argv: list[str]) -> int:
     ap.add_argument("--free", default=None, help="design variables to identify, e.g. e_JA,e_JR,e_SW,e_RW "
                     "(default: all ten of Eq. 13)")
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
+    ap.add_argument("--restarts", type=int, default=0,
+                    help="restart a converged complex around the best point up to N times (0: as published)")
     ap.add_argument("--tare", action="store_true",
                     help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
@@ -60,6 +62,8 @@ def identify_main(argv: list[str]) -> int:
     from .identify import identify
     from .problem import from_measurement
 
+    if args.restarts < 0:
+        raise ValueError(f"--restarts {args.restarts}: must be 0 or more")
     if args.max_evals < 1:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
     model = _model(args.model)
@@ -70,7 +74,7 @@ def identify_main(argv: list[str]) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "identify.log"))
     res = identify(problem, max_evals=args.max_evals, seed=args.seed, journal=out / "journal.jsonl",
-                   progress=not args.no_progress, workers=args.workers)
+                   progress=not args.no_progress, workers=args.workers, restarts=args.restarts)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{meas.id}, model {model}"
     try:

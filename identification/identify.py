@@ -140,7 +140,8 @@ class IdentificationResult:
     nfev_total: int = 0              # all evaluations, incl. speculative ones the method discarded
     nrounds: int = 0                 # wall-clock rounds (batches of evaluations)
     workers: int = 1
-    optimizer: Optional[ComplexResult] = None  # the optimiser's result, with its full history
+    optimizer: Optional[ComplexResult] = None  # the (last) optimiser run's result, with its full history
+    restarts: int = 0                # restarts made (see identify)
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -156,7 +157,7 @@ class IdentificationResult:
             "message": self.message, "history_f": list(map(float, self.history_f)),
             "iterations": _jsonable(self.iterations or {}),
             "nfev_total": self.nfev_total, "discarded": self.nfev_total - self.nfev,
-            "rounds": self.nrounds, "workers": self.workers,
+            "rounds": self.nrounds, "workers": self.workers, "restarts": self.restarts,
             "seconds": self.seconds, "window_s": float(p.times[-1]),
         }
 
@@ -166,48 +167,100 @@ def _channels() -> list:
     return FORCE_CHANNELS
 
 
+RESTART_WIDTH = 0.15   # half-width of a restart's box, as a share of each variable's bound range
+
+
 def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
              journal: Optional[Path] = None, progress: bool = True, f_tol: float = 1e-6,
-             x_tol: float = 1e-4, workers: int = 1) -> IdentificationResult:
+             x_tol: float = 1e-4, workers: int = 1, restarts: int = 0) -> IdentificationResult:
     """Complex-RF on the problem (the parallel variant with `workers` > 1,
     each worker process with its own FMU instance).
 
+    `restarts`: when the complex has converged (function or parameter spread)
+    before `max_evals`, start a new complex in a box of +-RESTART_WIDTH of the
+    bound ranges around the best point (the best point in it), up to this many
+    times, until the budget is used. The Complex contracts onto a ridge of a
+    rough objective long before the minimum (the release transient: f stops at
+    20x the noise floor); a fresh, smaller complex picks the descent up again.
+    0 is the method as published.
+
     `nfev` and `history_f` count the evaluations the method used (`max_evals`
-    limits them); with workers, `nfev_total` adds the speculative ones it
-    discarded. An exception of the objective, in this process or a worker, is
-    a bad point with a logged line, never the end of the run."""
+    limits them, over all restarts); with workers, `nfev_total` adds the
+    speculative ones it discarded. An exception of the objective, in this
+    process or a worker, is a bad point with a logged line, never the end of
+    the run."""
+    if int(restarts) < 0:
+        raise ValueError(f"restarts = {restarts}: must be >= 0")
     t0 = time.time()
     jr = Journal(journal)
     x0 = problem.x0_vector()
     if x0 is None:
         x0 = np.array([0.5 * (lo + hi) for lo, hi in problem.bounds_array])
-    opts = dict(x0=x0, max_evals=max_evals, seed=seed, progress=progress, f_tol=f_tol, x_tol=x_tol)
+    lo, hi = np.array(problem.bounds_array, float).T
+    n_points = len(lo) + 2
+    runs, evaluated = [], 0
     try:
-        if workers > 1:
-            from concurrent.futures import ProcessPoolExecutor
-            from .complex_rfp import minimize_complex_parallel
-            with ProcessPoolExecutor(workers) as ex:
-                mapper = journaled_map(jr, ex)
-                res = minimize_complex_parallel(problem, problem.bounds_array, n_parallel=workers,
-                                                strategy="speculative", map_fn=mapper, **opts)
-            evaluated = mapper.counter["evaluated"]
-        else:
-            obj = JournaledObjective(problem, jr)
-            res = minimize_complex(obj, problem.bounds_array, **opts)
-            evaluated = obj.evaluated
-        hist = res.history
-        used = hist.used_order()
-        history_f = np.asarray(hist.f, float)[used]
+        bounds, start, budget = problem.bounds_array, x0, int(max_evals)
+        while True:
+            r = len(runs)
+            res, n_sim = _complex_run(problem, jr, bounds, start, budget, seed if r == 0 else [seed, r],
+                                      progress, f_tol, x_tol, workers)
+            runs.append(res)
+            evaluated += n_sim
+            budget -= int(res.nfev_used)
+            if r >= restarts or budget < n_points or not res.success:
+                break
+            best = min(runs, key=lambda q: q.fun)
+            half = RESTART_WIDTH * (hi - lo)
+            bounds = list(zip(np.maximum(lo, best.x - half), np.minimum(hi, best.x + half)))
+            start = np.asarray(best.x, float)
+        last, best = runs[-1], min(runs, key=lambda q: q.fun)
+        history_f = np.concatenate([np.asarray(q.history.f, float)[q.history.used_order()] for q in runs])
         f0 = float(history_f[0])  # x0 is the first point of the initial complex
         H0 = _safe_H(problem, x0)
-        H = _safe_H(problem, res.x)
+        H = _safe_H(problem, best.x)
     finally:
         jr.close()
-    return IdentificationResult(problem, x0, f0, H0, np.asarray(res.x), float(res.fun), H, int(res.nfev_used),
-                                evaluated, jr.replayed, res.message, history_f, time.time() - t0,
-                                iterations={k: np.asarray(v).copy() for k, v in hist.iterations.items()},
-                                nfev_total=int(res.nfev), nrounds=int(res.nrounds), workers=max(1, int(workers)),
-                                optimizer=res)
+    message = last.message if len(runs) == 1 else f"{last.message} (after {len(runs) - 1} restarts)"
+    return IdentificationResult(problem, x0, f0, H0, np.asarray(best.x), float(best.fun), H,
+                                int(sum(q.nfev_used for q in runs)), evaluated, jr.replayed, message, history_f,
+                                time.time() - t0, iterations=_joined_iterations(runs),
+                                nfev_total=int(sum(q.nfev for q in runs)), nrounds=int(sum(q.nrounds for q in runs)),
+                                workers=max(1, int(workers)), optimizer=last, restarts=len(runs) - 1)
+
+
+def _complex_run(problem, jr: Journal, bounds, x0, budget: int, seed, progress: bool, f_tol: float,
+                 x_tol: float, workers: int) -> tuple:
+    """One Complex-RF (or RFP) run behind the journal: (result, evaluations simulated)."""
+    opts = dict(x0=x0, max_evals=budget, seed=seed, progress=progress, f_tol=f_tol, x_tol=x_tol)
+    if workers > 1:
+        from concurrent.futures import ProcessPoolExecutor
+        from .complex_rfp import minimize_complex_parallel
+        with ProcessPoolExecutor(workers) as ex:
+            mapper = journaled_map(jr, ex)
+            res = minimize_complex_parallel(problem, bounds, n_parallel=workers,
+                                            strategy="speculative", map_fn=mapper, **opts)
+        return res, mapper.counter["evaluated"]
+    obj = JournaledObjective(problem, jr)
+    res = minimize_complex(obj, bounds, **opts)
+    return res, obj.evaluated
+
+
+def _joined_iterations(runs: list) -> dict:
+    """The iteration tables of successive runs as one: iterations, rounds and
+    evaluation counts continue from the previous run's."""
+    out: dict = {}
+    it = rnd = nfev = 0
+    for q in runs:
+        tab = q.history.iterations
+        shift = {"iteration": it, "round": rnd, "nfev": nfev}
+        for k, v in tab.items():
+            out.setdefault(k, []).append(np.asarray(v) + shift.get(k, 0))
+        if len(tab.get("iteration", [])):
+            it = int(out["iteration"][-1][-1]) + 1
+            rnd = int(out["round"][-1][-1]) + 1
+        nfev += int(q.nfev_used)
+    return {k: np.concatenate(v) for k, v in out.items()}
 
 
 def _safe_H(problem: IdentificationProblem, x) -> np.ndarray:

@@ -39,17 +39,19 @@ def release_problem(fmu_file):
 
 
 def test_recovery_from_the_release_transient(release_problem):
+    """Complex-RF with restarts (identify(restarts=...)) recovers e_JA, e_SW and
+    e_RW within +-0.03 and drives f to the noise floor f(truth); e_JR is below
+    the noise (next test)."""
     truth = np.array([TRUTH[k] for k in CORS])
     f_truth = release_problem(truth)
-    res = identify(release_problem, max_evals=300, seed=0, progress=False)
+    res = identify(release_problem, max_evals=1000, seed=0, progress=False, restarts=3)
     err = dict(zip(CORS, res.x - truth))
     for k in ("contact.e_JA", "contact.e_SW", "contact.e_RW"):
         assert abs(err[k]) <= 0.03, (k, err)
-    # The objective falls fivefold from the start but stalls at ~20x the noise
-    # floor f(truth): along e_JA the landscape is still rough at the 0.01 scale
-    # (docs/identification.md); this records what is reached, not the goal.
-    assert res.f < 0.2 * res.f0
-    assert res.f < 40 * f_truth
+    assert res.restarts >= 1 and res.nfev <= 1000
+    # the method as published stops on its parameter spread at ~20x the floor (726
+    # evaluations with this seed); the restart takes it to within 2x
+    assert res.f < 2.5 * f_truth, (res.f, f_truth)
 
 
 def test_radial_joint_cor_is_below_the_noise(release_problem):
