@@ -57,7 +57,8 @@ import numpy as np  # noqa: E402
 import identification.problem as problem_mod  # noqa: E402
 from identification.problem import DESIGN, IdentificationProblem  # noqa: E402
 
-METHODS = ("complex-rf", "complex-rfp", "de", "cma-es")
+METHODS = ("complex-rf", "complex-rf-restart", "complex-rfp", "de", "cma-es")
+RESTARTS = 10   # complex-rf-restart: identify(restarts=RESTARTS)
 RESULTS = ROOT / "benchmarks" / "results" / "identification_optimisers.json"
 DOC = ROOT / "docs" / "optimizer_benchmark.md"
 SECTION = "## On the identification problem"
@@ -154,10 +155,11 @@ def run_one(method: str, problem: IdentificationProblem, budget: int, seed: int,
     truth = np.array([TRUTH[k] for k in CORS])
     marks = sorted({100, 300, 500, budget})
     w0, c0 = time.perf_counter(), _cpu()
-    if method in ("complex-rf", "complex-rfp"):
+    if method in ("complex-rf", "complex-rf-restart", "complex-rfp"):
         from identification.identify import identify
-        workers = 1 if method == "complex-rf" else 2
-        res = identify(problem, max_evals=budget, seed=seed, progress=False, workers=workers)
+        workers = 2 if method == "complex-rfp" else 1
+        res = identify(problem, max_evals=budget, seed=seed, progress=False, workers=workers,
+                       restarts=RESTARTS if method == "complex-rf-restart" else 0)
         x, f = np.asarray(res.x), float(res.f)
         trace = np.asarray(res.history_f)
         info = {"nfev": int(res.nfev), "nfev_total": int(res.nfev_total), "simulated": int(res.evaluated),
@@ -278,7 +280,9 @@ def doc_section(data: dict) -> str:
         f"is {s['f_truth']:.3g}.", "",
         f"Budget {s['budget']} evaluations per run, seeds {', '.join(map(str, seeds))}. "
         "Complex-RF through `identify(workers=1)` (start point in the initial complex, defaults "
-        "f_tol 1e-6, x_tol 1e-4); Complex-RFP through `identify(workers=2)`: two worker processes with "
+        "f_tol 1e-6, x_tol 1e-4), as published; complex-rf-restart the same with "
+        f"`identify(restarts={RESTARTS})`: a converged complex starts again in a box of +-15 % of the "
+        "bounds around the best point until the budget is used; Complex-RFP through `identify(workers=2)`: two worker processes with "
         "an FMU each, the speculative strategy, whose budget counts the evaluations the method uses "
         "(the discarded speculative ones are in *evals total*); differential evolution (scipy, popsize "
         f"15, i.e. {15 * len(CORS)} points and {max(1, s['budget'] // (15 * len(CORS)) - 1) + 1} generations "
@@ -364,6 +368,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-write", action="store_true", help="print only")
     ap.add_argument("--from-json", action="store_true", help="rewrite the doc section from --out, no runs")
     ap.add_argument("--reading", default=None, help="a file whose text goes below the tables")
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the runs of the other methods already in --out (same budget and seeds)")
     args = ap.parse_args(argv)
     if args.from_json:
         data = json.loads(Path(args.out).read_text())
@@ -422,6 +428,19 @@ def main(argv: list[str] | None = None) -> int:
         "runs": runs,
         "summary": summarize(runs),
     }
+    if args.merge and Path(args.out).is_file():
+        old = json.loads(Path(args.out).read_text())
+        if (old["settings"]["budget"], old["settings"]["seeds"]) != (budget, n_seeds):
+            raise SystemExit(f"--merge: {args.out} has budget {old['settings']['budget']} and "
+                             f"{old['settings']['seeds']} seeds, this run {budget} and {n_seeds}")
+        kept = [r for r in old["runs"] if r["method"] not in methods]
+        data["runs"] = sorted(kept + runs, key=lambda r: (r["seed"], METHODS.index(r["method"])))
+        data["summary"] = summarize(data["runs"])
+        data["settings"]["merged"] = {"from": old["settings"]["date"], "methods_run_now": methods,
+                                      "wall_s_now": wall, "cpu_s_now": cpu}
+        for k in ("wall_s", "cpu_s"):
+            data["settings"][k] = old["settings"][k] + data["settings"][k]
+        data.setdefault("reading", old.get("reading", ""))
     if args.reading:
         data["reading"] = Path(args.reading).read_text()
     for m, v in data["summary"].items():
