@@ -265,7 +265,7 @@ def transducer_for(track, s_m: float, v: float, settle: float) -> int:
     """The cart that passes s_M 1.5 s after settling at the nominal speed (not
     before 1 s, so that s_M and v_s anywhere within their bounds still come
     after it): every evaluation then simulates settle + ~1.5 s + the record,
-    not up to a lap more (layout 3: 300-450 s)."""
+    not up to a lap more (cart 0 on the field set's layout 3: 117-176 s)."""
     from lss_fmu.triggered import arriving_cart
     return arriving_cart(float(track.length), int(track.n_carts), s_m, max(abs(v), 0.1), settle + 1.5,
                          earliest=settle + 1.0)[0]
