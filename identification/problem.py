@@ -145,15 +145,16 @@ class IdentificationProblem:
         if self.anti_alias is None:
             return simulate_triggered(simulator(), params, s_m, self.times, settle=self.settle,
                                       tolerance=self.tolerance)
-        return self._through_filter(simulate_triggered, params, s_m)
+        return self._through_filter(params, s_m)
 
-    def _through_filter(self, simulate_triggered, params: dict, s_m: float) -> np.ndarray:
+    def _through_filter(self, params: dict, s_m: float) -> np.ndarray:
         """The simulation through the logger's declared anti-alias filter: on the
         communication grid (half the sample spacing) from FILTER_LEAD s before
         the trigger, so that the filter's 4 ms of group delay is in the model and
         not in the residual."""
         from scipy import signal
         from scipy.interpolate import CubicSpline
+        from lss_fmu.triggered import simulate_triggered
         order, cutoff, causal = self.anti_alias
         dt = float(np.median(np.diff(self.times))) if len(self.times) > 1 else 1.0 / 300.0
         h = dt / 2.0
