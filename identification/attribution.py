@@ -125,10 +125,12 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
     # the objective's tare: where the channel's mean lies within the zero
     # tolerance it is taken out of the residual and of every signature alike
     demean = np.zeros(r.shape[1], bool)
+    taken = np.zeros(r.shape[1])
     if problem.tare is not None:
         m = r.mean(axis=0)
         demean = np.abs(m) <= problem.tare
-        r = r - np.clip(m, -problem.tare, problem.tare)
+        taken = np.clip(m, -problem.tare, problem.tare)
+        r = r - taken
     w = weights(problem)
     _, f_base = _lsq(r, [], w)
     J = [_demean(g, demean) for g in base_jacobian(problem, x, sim0)] if base_columns else []
@@ -147,7 +149,7 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
             log.warning("effect %s, %s: probe failed: %s", effect.name, hyp.label, exc)
             failed.append({"effect": effect.name, "hypothesis": hyp.label, "error": str(exc)[:300]})
             continue
-        scores.append(_score(effect, hyp, G, r, J, w, f_base, f_J, ctx))
+        scores.append(_score(effect, hyp, G, r, J, w, f_base, f_J, ctx, taken))
     if bar is not None:
         bar.close()
     best = {}
@@ -179,13 +181,19 @@ def _signatures(problem, x, sim0, hyp: Hypothesis, bar) -> list:
 
 
 def _score(effect: Effect, hyp: Hypothesis, G: list, r, J: list, w, f_base: float, f_J: float,
-           ctx: Context) -> HypothesisScore:
+           ctx: Context, taken=None) -> HypothesisScore:
     c_all, f_JG = _lsq(r, J + G, w)
     coef = c_all[len(J):]
     if isinstance(effect, SensorError):
         # a gain or offset within the transducer's specification is not a fault: only
-        # the probes fitted beyond it count (and are refitted alone)
-        out = np.abs(coef) > effect.tolerance(ctx)
+        # the probes fitted beyond it count (and are refitted alone). An offset is
+        # fitted to the tared residual, so the channel's zero error is the fitted
+        # offset plus what the tare took: that sum, not the fitted part alone, is
+        # what the specification bounds (else the tolerance counts twice)
+        zero = np.zeros(len(coef))
+        if taken is not None:
+            zero[1::2] = taken
+        out = np.abs(coef + zero) > effect.tolerance(ctx)
         G = [g if o else np.zeros_like(g) for g, o in zip(G, out)]
         c_all, f_JG = _lsq(r, J + G, w)
         coef = np.where(out, c_all[len(J):], 0.0)

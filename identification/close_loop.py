@@ -34,6 +34,7 @@ from .catalogue import CATALOGUE, Context
 from .extension import extended_problem, extension_of
 from .identify import identify
 from .problem import IdentificationProblem, nrmsd, tare_of, tared
+from .refine import refine
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +44,7 @@ LOCAL_SHARE = 0.5    # unexplained residual 'concentrates' if half of it sits in
 LOCAL_WINDOW = 0.1   # ... this fraction of the record (or 0.1 s, whichever is longer) of one channel
 RESCORE = 3          # effects fitted through the FMU after the linear ranking ...
 RESCORE_EVALS = 20   # ... with this many evaluations each
+REFINE_EVALS = 80    # simulations of the local refinement (identification.refine) ending each extension
 SIGNALS = ["transducer.s", "transducer.v", "transducer.joint.v_axial"]
 
 
@@ -65,6 +67,7 @@ class Round:
     problem_extended: Optional[IdentificationProblem] = field(default=None, repr=False)
     base_problem: Optional[IdentificationProblem] = field(default=None, repr=False)
     residual: object = field(default=None, repr=False)
+    refined: dict = field(default_factory=dict)   # the local refinement of the extension: f before/after, runs
 
     def to_dict(self) -> dict:
         chans = _channels()
@@ -74,6 +77,7 @@ class Round:
             "f_extended": self.f_extended,
             "nrmsd_extended": None if self.H_extended is None else dict(zip(chans, map(float, self.H_extended))),
             "identified": self.identified, "amplitude": self.amplitude, "location": self.location,
+            "refined": self.refined,
             "attribution": self.attribution.to_dict(),
         }
 
@@ -193,7 +197,7 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
                effects: Optional[Sequence[str]] = None, rounds: int = 1, base_evals: int = 300,
                max_evals: int = 200, seed: int = 0, out: Optional[Path] = None, progress: bool = False,
                workers: int = 1, sensor_offset_std: Optional[dict] = None,
-               fit_evals: int = RESCORE_EVALS) -> CloseLoopResult:
+               fit_evals: int = RESCORE_EVALS, refine_evals: int = REFINE_EVALS) -> CloseLoopResult:
     """The loop on one problem: base identification (unless x_base is given),
     then up to `rounds` rounds of analysis, attribution and extension.
     `sensor_offset_std`: the transducer's declared zero tolerance per force
@@ -211,7 +215,8 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
     remaining = list(effects or CATALOGUE)
     for k in range(1, rounds + 1):
         rnd = one_round(base, x, k, remaining, max_evals=max_evals, seed=seed + k, out=out, progress=progress,
-                        workers=workers, sensor_offset_std=sensor_offset_std, fit_evals=fit_evals)
+                        workers=workers, sensor_offset_std=sensor_offset_std, fit_evals=fit_evals,
+                        refine_evals=refine_evals)
         result_rounds.append(rnd)
         if not rnd.confirmed:
             break
@@ -228,7 +233,8 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
 
 def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: Sequence[str], *,
               max_evals: int, seed: int, out: Optional[Path], progress: bool, workers: int = 1,
-              sensor_offset_std: Optional[dict] = None, fit_evals: int = RESCORE_EVALS) -> Round:
+              sensor_offset_std: Optional[dict] = None, fit_evals: int = RESCORE_EVALS,
+              refine_evals: int = REFINE_EVALS) -> Round:
     sim = base.simulate(x)
     H = nrmsd(base.samples, sim, base.tare)
     f_base = float(np.sum(H ** 2))
@@ -273,6 +279,15 @@ def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: 
         rnd.H_extended = best.stage1.H
     else:
         rnd.H_extended = res.H
+    if refine_evals > 0:
+        # the complex contracts onto a ridge before the minimum (docs/complex_rf.md); this point
+        # is the next round's base, and what it leaves unexplained is the denominator of every
+        # share there: a local refinement walks the rest of the way (identification.refine)
+        ref = refine(stage2, rnd.x_extended, max_evals=refine_evals)
+        rnd.refined = {"f_start": ref.f_start, "f": ref.f, "nfev": ref.nfev, "iterations": ref.iterations}
+        if ref.f < rnd.f_extended:
+            rnd.x_extended, rnd.f_extended = ref.x, ref.f
+            rnd.H_extended = stage2.channel_errors(ref.x)
     vals = stage2.values(rnd.x_extended)
     rnd.identified = {n: float(vals[n]) for n in ext.free}
     rnd.identified.update({n: v for n, v in ext.fixed.items()})
@@ -357,6 +372,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--fit-evals", type=int, default=RESCORE_EVALS,
                     help="evaluations fitting each of the top candidate effects alone (raised to what the "
                          "effect's complex needs)")
+    ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
+                    help="simulations of the local (Levenberg-Marquardt) refinement ending each extended "
+                         "identification (0: none)")
     ap.add_argument("--rounds", type=int, default=2, help="rounds of the loop (each finds at most one effect)")
     ap.add_argument("--effects", default=None, help=f"candidate effects (default all: {','.join(CATALOGUE)})")
     ap.add_argument("--seed", type=int, default=0)
@@ -377,6 +395,8 @@ def main(argv: list[str]) -> int:
                     ("--fit-evals", args.fit_evals)):
         if v < 1:
             raise ValueError(f"{name} {v}: must be at least 1")
+    if args.refine_evals < 0:
+        raise ValueError(f"--refine-evals {args.refine_evals}: must be at least 0")
     effects = None
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
@@ -397,7 +417,7 @@ def main(argv: list[str]) -> int:
                      max_evals=args.max_evals, seed=args.seed, out=out, progress=not args.no_progress,
                      workers=args.workers,
                      sensor_offset_std=(meas.meta.get("sensor") or {}).get("force_offset_std_N"),
-                     fit_evals=args.fit_evals)
+                     fit_evals=args.fit_evals, refine_evals=args.refine_evals)
     write_json_atomic(out / "result.json", res.to_dict())
     report = write_report(res, out)
     for r in res.rounds:

@@ -74,10 +74,6 @@ def test_no_effect_no_false_alarm(fmu_file):
     assert res.verdict.startswith("nothing significant"), res.verdict
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (issue 7): with a second effect in the data, round 1's extended "
-                   "identification stops at 16x the noise floor with the wheel's runout 30 % low, and from there "
-                   "the second effect (a sensor fault) explains only 12 % of f, even with round 1's parameters "
-                   "free in round 2's base")
 def test_two_effects_are_found_in_turn(fmu_file):
     problem, params = effect_case(["wheel_oor", "sensor"], 31)
     res = _loop(problem, rounds=2)
