@@ -74,10 +74,13 @@ def test_no_effect_no_false_alarm(fmu_file):
     assert res.verdict.startswith("nothing significant"), res.verdict
 
 
-def test_two_effects_are_found_in_turn(fmu_file):
-    problem, params = effect_case(["wheel_oor", "sensor"], 31)
+# two seeds (a round wheel's runout with zero errors on different channels); seed 33 is a
+# known failure, recorded in docs/close_loop.md: a -250 N zero error on F_x first passes for a bump
+@pytest.mark.parametrize("seed", [31, 32])
+def test_two_effects_are_found_in_turn(fmu_file, seed):
+    problem, params = effect_case(["wheel_oor", "sensor"], seed)
     res = _loop(problem, rounds=2)
-    _record("two_31", res, truth=params)
+    _record(f"two_{seed}", res, truth=params)
     assert sorted(res.found) == ["sensor", "wheel_oor"], [r.verdict for r in res.rounds]
 
 
