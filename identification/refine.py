@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problem import IdentificationProblem
+from .problem import IdentificationProblem, tared
 
 log = logging.getLogger(__name__)
 
@@ -36,10 +36,8 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
     r = problem.samples - sim
     demean = np.zeros(r.shape[1], bool)
     if problem.tare is not None:
-        m = r.mean(axis=0)
-        demean = np.abs(m) <= problem.tare
-        r = r - np.clip(m, -problem.tare, problem.tare)
-    return sim, r * sw, demean
+        demean = np.abs(r.mean(axis=0)) <= problem.tare
+    return sim, tared(r, problem.tare) * sw, demean
 
 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
