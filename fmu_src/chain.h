@@ -157,6 +157,10 @@ void chain_outputs(Chain *c, LSSOutputs *out);
 /* Right-hand side dy = f(t, y); fills the scratch. */
 void chain_rhs(Chain *c, double t, const double *y, double *dy);
 
+/* (t, y) as the chain's state; with accept, as after an accepted step of
+ * chain_step (for integrators outside the core). 1 if y or f(t, y) changed. */
+int chain_put_state(Chain *c, double t, double *y, int accept);
+
 /* State snapshot for get/set/serialise FMU state. */
 size_t chain_state_size(const Chain *c);
 void chain_state_save(const Chain *c, double *buf);

@@ -3,6 +3,7 @@
  * contact memory (onset velocities) is updated, the projection warm starts
  * advance, and drifting quaternions are renormalised. */
 #include <stdio.h>
+#include <string.h>
 
 #include "chain_internal.h"
 
@@ -69,5 +70,20 @@ void chain_solver_init(Chain *c) {
 int chain_step(Chain *c, double t_end, char *err, size_t errlen) {
     int r = dopri_integrate(&c->ode, &c->st.ode, c->st.y, t_end, err, errlen);
     c->scratch_at_state = (r == 0);
+    return r;
+}
+
+/* For integrators outside the core (benchmarks): puts (t, y) into the chain;
+ * with accept, runs what follows an accepted step (y may be renormalised).
+ * Returns 1 if y or the right-hand side at y changed. */
+int chain_put_state(Chain *c, double t, double *y, int accept) {
+    memcpy(c->st.y, y, sizeof(double) * (size_t)c->m.n_y);
+    c->st.ode.t = t;
+    chain_rhs(c, t, c->st.y, c->dy_scratch);
+    int r = accept ? accepted(c, t, c->st.y) : 0;
+    if (r) chain_rhs(c, t, c->st.y, c->dy_scratch);
+    c->scratch_at_state = 1;
+    c->st.ode.fsal_valid = 0;
+    memcpy(y, c->st.y, sizeof(double) * (size_t)c->m.n_y);
     return r;
 }

@@ -53,6 +53,13 @@ void lss_chain_stats(void *c, long *out3);
 /* The right-hand side dy = f(t, y) of the chain's ODE at any state y
  * (n_y entries; for Jacobians and stiffness studies). */
 void lss_chain_rhs(void *c, double t, const double *y, double *dy);
+/* For integrators outside the core (benchmarks/bench_integrators.py): puts
+ * (t, y) into the chain and, with accept, does what follows an accepted step
+ * (contact onset memory, projection warm starts, quaternion norm; y is
+ * updated). Returns 1 if y or the right-hand side at y changed. */
+int lss_chain_put_state(void *c, double t, double *y, int accept);
+/* The solver's error weights: component i is judged by tol (scale[i] + rel[i] |y_i|). */
+void lss_chain_error_scales(void *c, double *scale, double *rel);
 int lss_chain_state_size(void *c);
 void lss_chain_state_save(void *c, double *buf);
 void lss_chain_state_load(void *c, const double *buf);

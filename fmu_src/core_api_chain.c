@@ -104,6 +104,14 @@ void lss_chain_rhs(void *c, double t, const double *y, double *dy) {
     ch->scratch_at_state = 0;
 }
 
+int lss_chain_put_state(void *c, double t, double *y, int accept) { return chain_put_state(c, t, y, accept); }
+
+void lss_chain_error_scales(void *c, double *scale, double *rel) {
+    Chain *ch = c;
+    memcpy(scale, ch->m.err_scale, sizeof(double) * (size_t)ch->m.n_y);
+    memcpy(rel, ch->m.err_rel, sizeof(double) * (size_t)ch->m.n_y);
+}
+
 int lss_chain_state_size(void *c) { return (int)chain_state_size(c); }
 void lss_chain_state_save(void *c, double *buf) { chain_state_save(c, buf); }
 void lss_chain_state_load(void *c, const double *buf) { chain_state_load(c, buf); }
