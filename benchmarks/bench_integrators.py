@@ -14,7 +14,13 @@ projection warm starts, quaternion norm). Methods:
   300 Hz communication points as the core's are;
 * dop853-free: the same with steps not cut; the outputs come from its
   7th-order dense output (3 more evaluations in each step that holds a
-  communication point).
+  communication point);
+* radau: Radau IIA of order 5 (implicit; scipy's, with the core's max norm
+  and error weights), its Jacobian by grouped differences over the chain's
+  sparsity (found once by perturbing each state; rows of the bookkeeping
+  states, which feed nothing back, left out). Its evaluations include the
+  Jacobians'; its linear algebra (sparse LU, real and complex) is not
+  counted.
 
 What is counted: right-hand sides per simulated second (what a method
 changes; one evaluation costs what it costs in the core) and the restart
@@ -35,7 +41,11 @@ import argparse
 import json
 
 import numpy as np
+from scipy.integrate import Radau
 from scipy.integrate._ivp import dop853_coefficients as D8
+from scipy.integrate._ivp import radau as radau_module
+from scipy.optimize._numdiff import group_columns
+from scipy.sparse import csc_matrix
 from scipy.integrate._ivp.rk import RK23, RK45, Dop853DenseOutput
 
 from bench_common import COMM, FORCE_IDX, machine, nrmsd
@@ -52,10 +62,12 @@ def tableau(method: str) -> dict:
         return dict(A=RK45.A, B=RK45.B, C=RK45.C, E=RK45.E, alpha=0.2 - 0.75 * 0.04, beta=0.04)
     if method == "bs3":
         return dict(A=RK23.A, B=RK23.B, C=RK23.C, E=RK23.E, alpha=1 / 3 - 0.75 * 0.04, beta=0.04)
+    if method == "radau":
+        return dict(implicit=True)
     if method in ("dop853", "dop853-free"):
         return dict(A=D8.A[:12, :12], B=D8.B, C=D8.C[:12], E5=D8.E5, E3=D8.E3, alpha=1 / 8, beta=0.0,
                     free=method == "dop853-free")
-    raise SystemExit(f"unknown method {method!r}: core, dp5, bs3, dop853, dop853-free")
+    raise SystemExit(f"unknown method {method!r}: core, dp5, bs3, dop853, dop853-free, radau")
 
 
 class Chain:
@@ -66,7 +78,7 @@ class Chain:
         self.n = lib.lss_chain_ny(c)
         self.scale, self.rel = np.empty(self.n), np.empty(self.n)
         lib.lss_chain_error_scales(c, self._p(self.scale), self._p(self.rel))
-        self.n_rhs = 0
+        self.n_rhs = self.n_jac = 0
         self._out = np.empty(len(VARIABLES))
 
     def _p(self, a):
@@ -154,6 +166,79 @@ def integrate(ch: Chain, tab: dict, tol: float, n_comm: int):
     return forces, steps, rejected
 
 
+def sparsity(ch: Chain, dense_row: int = 80):
+    """The Jacobian's pattern at the chain's state, by perturbing each state
+    once; rows with more than dense_row entries (bookkeeping sums over all
+    carts) are left out so that the columns can be grouped."""
+    t, y = ch.state()
+    f0, cols = ch.f(t, y), []
+    for j in range(ch.n):
+        yp = y.copy()
+        yp[j] += 1e-7 * max(1.0, abs(yp[j]))
+        cols.append(np.flatnonzero(ch.f(t, yp) != f0))
+    rows = np.concatenate(cols)
+    colidx = np.concatenate([np.full(len(r), j) for j, r in enumerate(cols)])
+    keep = np.bincount(rows, minlength=ch.n)[rows] <= dense_row
+    diag = np.arange(ch.n)
+    rows, colidx = np.concatenate([rows[keep], diag]), np.concatenate([colidx[keep], diag])
+    return csc_matrix((np.ones(len(rows)), (rows, colidx)), shape=(ch.n, ch.n))
+
+
+def grouped_jacobian(ch: Chain, pattern):
+    """J(t, y) by forward differences, one evaluation per group of columns
+    that share no row (scipy's grouping), plus one at y."""
+    coo = pattern.tocoo()
+    rows, cols = coo.row, coo.col
+    groups = group_columns(pattern)
+    members = [np.flatnonzero(groups == g) for g in range(groups.max() + 1)]
+    entries = [np.flatnonzero(groups[cols] == g) for g in range(len(members))]
+
+    def jac(t, y):
+        ch.n_jac += 1
+        f0, data = ch.f(t, y), np.empty(len(rows))
+        h = 1e-7 * np.maximum(1.0, np.abs(y))
+        for cols_g, e in zip(members, entries):
+            yp = y.copy()
+            yp[cols_g] += h[cols_g]
+            df = ch.f(t, yp) - f0
+            data[e] = df[rows[e]] / h[cols[e]]
+        return csc_matrix((data, (rows, cols)), shape=pattern.shape)
+
+    return jac
+
+
+def integrate_radau(ch: Chain, tol: float, n_comm: int, pattern):
+    """scipy's Radau IIA with the core's max norm and weights, each step
+    ending on the communication points as the core's do."""
+    saved, radau_module.norm = radau_module.norm, lambda x: float(np.max(np.abs(x)))
+    try:
+        return _radau_run(ch, tol, n_comm, pattern)
+    finally:
+        radau_module.norm = saved
+
+
+def _radau_run(ch: Chain, tol: float, n_comm: int, pattern):
+    t0, y = ch.state()
+    y = y.copy()
+    ch.put(t0, y, True)
+    s = Radau(ch.f, t0, y, t0 + COMM, rtol=tol, atol=tol * ch.scale, jac=grouped_jacobian(ch, pattern),
+              first_step=1e-3)
+    s.rtol = np.maximum(tol * ch.rel, 1e-13)  # per component, as the core's (the constructor takes a scalar)
+    forces, steps = np.empty((n_comm, len(FORCE_IDX))), 0
+    for k in range(n_comm):
+        s.t_bound, s.status = t0 + (k + 1) * COMM, "running"
+        while s.status == "running":
+            msg = s.step()
+            if s.status == "failed":
+                raise RuntimeError(f"Radau failed at t = {s.t}: {msg}")
+            steps += 1
+            yy = s.y.copy()
+            if ch.put(s.t, yy, True):
+                s.y, s.f = yy, ch.f(s.t, yy)
+        forces[k] = ch.forces()
+    return forces, steps, 0
+
+
 def measure(core: Core, layout: str, runs: list, settle: float, horizon: float, pieces: int) -> list:
     n_settle, n_hor = round(settle / COMM), round(horizon / COMM)
     c = core.new(layout, 1e-6)
@@ -170,6 +255,11 @@ def measure(core: Core, layout: str, runs: list, settle: float, horizon: float, 
         tol = float(tol)
         c = core.new(layout, tol)
         ch = Chain(core, c)
+        pattern = None
+        if method == "radau":
+            core.load(c, states[0])
+            pattern = sparsity(ch)
+            ch.n_rhs = 0
         out, steps, rejected = [], 0, 0
         for buf in states:
             core.load(c, buf)
@@ -179,7 +269,9 @@ def measure(core: Core, layout: str, runs: list, settle: float, horizon: float, 
                 st = core.stats(c) - s0
                 steps, rejected, ch.n_rhs = steps + st[0], rejected + st[1], ch.n_rhs + st[2]
             else:
-                fo, a, r = integrate(ch, tableau(method), tol, n_hor)
+                tab = tableau(method)
+                fo, a, r = (integrate_radau(ch, tol, n_hor, pattern) if tab.get("implicit")
+                            else integrate(ch, tab, tol, n_hor))
                 out.append(fo)
                 steps, rejected = steps + a, rejected + r
         n_carts = core.lib.lss_chain_n_carts(c)
@@ -188,9 +280,10 @@ def measure(core: Core, layout: str, runs: list, settle: float, horizon: float, 
         sim = pieces * n_hor * COMM
         r = dict(layout=layout, carts=n_carts, method=method, tol=tol, rhs_per_s=ch.n_rhs / sim,
                  steps_per_s=float(steps) / sim, rejected_per_s=float(rejected) / sim,
+                 jacobians_per_s=ch.n_jac / sim,
                  nrmsd_restart_max=float(h.max()), nrmsd_restart=[float(x) for x in h])
         print(f"{layout} {method:11s} tol {tol:.0e}: {r['rhs_per_s']:6.0f} rhs/s, {r['steps_per_s']:5.0f} steps/s, "
-              f"{r['rejected_per_s']:4.0f} rejected/s; NRMSD restart max {100 * h.max():.2f} % "
+              f"{r['rejected_per_s']:4.0f} rejected/s{f', {ch.n_jac / sim:.0f} Jacobians/s' if ch.n_jac else ''}; NRMSD restart max {100 * h.max():.2f} % "
               f"(channels {' '.join(f'{100 * x:.2f}' for x in h)})", flush=True)
         results.append(r)
     return results
@@ -200,7 +293,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--layouts", nargs="+", default=["layout7", "layout1", "layout3"])
     ap.add_argument("--runs", nargs="+", default=DEFAULT_RUNS, help="method:tolerance, method one of "
-                    "core (the C core's DOPRI5), dp5, bs3, dop853, dop853-free")
+                    "core (the C core's DOPRI5), dp5, bs3, dop853, dop853-free, radau")
     ap.add_argument("--settle", type=float, default=1.0)
     ap.add_argument("--horizon", type=float, default=0.5, help="restart piece, s")
     ap.add_argument("--pieces", type=int, default=2)

@@ -52,3 +52,25 @@ def test_put_state_accept_renormalises_and_reports_it(core):
     scale, rel = ch.scale, ch.rel
     core.lib.lss_chain_free(c)
     assert scale.shape == y.shape and np.all(scale > 0) and set(np.unique(rel)) <= {0.0, 1.0}
+
+
+def test_radau_path_runs_and_agrees_with_the_core(core):
+    """The implicit path: its sparsity, grouped Jacobian and stepping on the
+    communication points give the core's forces over a short window."""
+    from bench_integrators import integrate_radau, sparsity
+
+    n = round(0.05 / COMM)
+    c = core.new("layout7", 1e-6)
+    core.run(c, 30)
+    start = core.save(c)
+    ref = core.run(c, n)
+    core.load(c, start)
+    ch = Chain(core, c)
+    pattern = sparsity(ch)
+    # each cart couples with its neighbours only: far fewer entries than dense
+    assert pattern.nnz < 0.05 * ch.n ** 2
+    ch.n_rhs = 0
+    forces, steps, _ = integrate_radau(ch, 1e-4, n, pattern)
+    core.lib.lss_chain_free(c)
+    assert steps >= n and ch.n_jac >= 1 and ch.n_rhs > steps
+    assert nrmsd(forces, ref).max() < 1e-2
