@@ -287,7 +287,7 @@ def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: 
         rnd.refined = {"f_start": ref.f_start, "f": ref.f, "nfev": ref.nfev, "iterations": ref.iterations}
         if ref.f < rnd.f_extended:
             rnd.x_extended, rnd.f_extended = ref.x, ref.f
-            rnd.H_extended = stage2.channel_errors(ref.x)
+            rnd.H_extended = nrmsd(stage2.samples, ref.sim, stage2.tare)
     vals = stage2.values(rnd.x_extended)
     rnd.identified = {n: float(vals[n]) for n in ext.free}
     rnd.identified.update({n: v for n, v in ext.fixed.items()})

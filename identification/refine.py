@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -28,6 +29,7 @@ class Refined:
     f_start: float
     nfev: int
     iterations: int
+    sim: Optional[np.ndarray] = None   # the simulation at x (None if the start point failed)
 
 
 def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> tuple:
@@ -93,4 +95,4 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 break
         if not better:
             break
-    return Refined(x, f, f_start, nfev, it)
+    return Refined(x, f, f_start, nfev, it, sim)

@@ -51,6 +51,7 @@ def test_refine_walks_to_the_minimum_and_never_goes_uphill():
     assert r.f < 1e-6 * r.f_start
     assert np.allclose(r.x, truth, rtol=1e-3, atol=1e-3), r.x
     assert r.nfev == p.nsim <= 200
+    assert np.array_equal(r.sim, p.simulate(r.x))   # the simulation handed back is the one at x
 
 
 def test_refine_keeps_the_budget_and_the_bounds():
