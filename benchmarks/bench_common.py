@@ -45,7 +45,7 @@ def load_core(lib_path: Optional[str] = None):
         return ccore.load()
     from cffi import FFI
     ffi = FFI()
-    ffi.cdef(ccore._cdef_from_header((build.SRC / "core_api.h").read_text()))
+    ffi.cdef(ccore._cdef_from_header(ccore.API_HEADER.read_text()))
     return ffi, ffi.dlopen(str(lib_path))
 
 

@@ -23,6 +23,7 @@ from .variables import VARIABLES, Var
 
 ROOT = Path(__file__).resolve().parent.parent
 SRC = ROOT / "fmu_src"
+TESTING = SRC / "testing"     # the flat C API of tests and benchmarks, and the C harness: never in the FMU
 BUILD = ROOT / "build"
 GEN = BUILD / "gen"
 FMU_PATH = BUILD / "LSSChain.fmu"
@@ -208,8 +209,14 @@ def generate() -> None:
 
 
 def model_sources() -> list[Path]:
-    """C sources of the model and its FMI glue (test-only files excluded)."""
-    return sorted(p for p in SRC.glob("*.c") if not p.name.startswith("test_"))
+    """C sources of the model and its FMI glue: what LSSChain.fmu is built from."""
+    return sorted(SRC.glob("*.c"))
+
+
+def testing_sources() -> list[Path]:
+    """The flat C API for tests and benchmarks (fmu_src/testing/core_api_*.c):
+    built into the test library (lss_fmu.ccore), never into the FMU."""
+    return sorted(TESTING.glob("core_api_*.c"))
 
 
 def resource_files() -> list[Path]:

@@ -3,8 +3,9 @@
 Used by tests and benchmarks that need what the FMU does not expose: the track
 frame at any arc length, a single-impact harness for the contact laws, the raw
 cost of the solver. Builds `build/liblsscore.so` from the model sources (all of
-`fmu_src/*.c` except the FMI glue) and the flat API declared in
-`fmu_src/core_api.h`, whose declarations cffi reads as they are.
+`fmu_src/*.c` except the FMI glue) and the flat API of `fmu_src/testing/`
+(declared in `core_api.h`, whose declarations cffi reads as they are). The
+FMU contains none of the testing API.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from cffi import FFI
 from . import build
 
 CORE_LIB = build.BUILD / ("liblsscore" + build.shared_suffix())
+API_HEADER = build.TESTING / "core_api.h"
 
 
 def _cdef_from_header(text: str) -> str:
@@ -33,13 +35,14 @@ def _stale(out: Path, inputs: list[Path]) -> bool:
 def load():
     """(ffi, lib) for the C core, rebuilt when a source is newer than the library."""
     build.generate()
-    sources = [p for p in build.model_sources() if p.name != "fmi2_glue.c"] + [build.GEN / "lss_vars.c"]
-    headers = sorted(build.SRC.glob("*.h"))
+    sources = ([p for p in build.model_sources() if p.name != "fmi2_glue.c"] + build.testing_sources()
+               + [build.GEN / "lss_vars.c"])
+    headers = sorted(build.SRC.glob("*.h")) + sorted(build.TESTING.glob("*.h"))
     if _stale(CORE_LIB, sources + headers):
         build.BUILD.mkdir(exist_ok=True)
         tmp = CORE_LIB.with_suffix(".tmp" + CORE_LIB.suffix)
-        build.compile_shared(tmp, sources, extra=["-fvisibility=default"])
+        build.compile_shared(tmp, sources, extra=["-fvisibility=default", "-I", str(build.TESTING)])
         tmp.replace(CORE_LIB)
     ffi = FFI()
-    ffi.cdef(_cdef_from_header((build.SRC / "core_api.h").read_text()))
+    ffi.cdef(_cdef_from_header(API_HEADER.read_text()))
     return ffi, ffi.dlopen(str(CORE_LIB))

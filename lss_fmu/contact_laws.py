@@ -13,7 +13,7 @@ free of m, K, n and v_i (see docs/contact_laws.md). Read one way it gives the
 chi a nominal e needs (law GZ); read the other way it gives the restitution a
 law's chi(e) really produces. This module solves it in Python with scipy
 (independently of the bisection in fmu_src/contact.c) and wraps the C
-single-impact harness (`lss_impact_run` in fmu_src/core_api_impact.c), which
+single-impact harness (`lss_impact_run` in fmu_src/testing/core_api_impact.c), which
 runs the chain's own solver, force and onset-memory code.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The C track geometry (fmu_src/track.c, layout_io.c) through its flat cffi API
-(fmu_src/core_api.h, "track geometry"), with numpy in and out.
+(fmu_src/testing/core_api.h, "track geometry"), with numpy in and out.
 
 Used by the tests that hold the C and Python geometry to each other and by
 anyone who wants the FMU's own track frame without running the FMU.
@@ -16,7 +16,7 @@ from .layout_format import LayoutError
 from .track_geometry import MOTOR_LENGTH, TOL_ANG, TOL_POS
 
 ERRLEN = 1024
-TRACK_SOURCES = ("layout_io.c", "track.c", "core_api_track.c")
+TRACK_SOURCES = ("layout_io.c", "track.c", "testing/core_api_track.c")
 
 
 @lru_cache(maxsize=1)
@@ -28,9 +28,10 @@ def _track_only():
 
     from . import build, ccore
     out = Path(tempfile.mkdtemp(prefix="lss_track_")) / ("libtrack" + build.shared_suffix())
-    build.compile_shared(out, [build.SRC / n for n in TRACK_SOURCES], extra=["-fvisibility=default"])
+    build.compile_shared(out, [build.SRC / n for n in TRACK_SOURCES],
+                         extra=["-fvisibility=default", "-I", str(build.TESTING)])
     ffi = FFI()
-    ffi.cdef(ccore._cdef_from_header((build.SRC / "core_api.h").read_text()))
+    ffi.cdef(ccore._cdef_from_header(ccore.API_HEADER.read_text()))
     return ffi, ffi.dlopen(str(out))
 
 

@@ -1,4 +1,4 @@
-"""The C harness (fmu_src/test_harness.c) drives the FMI 2.0 API without fmpy,
+"""The C harness (fmu_src/testing/test_harness.c) drives the FMI 2.0 API without fmpy,
 compiled together with the model sources:
 
 - under AddressSanitizer + UndefinedBehaviorSanitizer (LeakSanitizer on):
@@ -35,7 +35,7 @@ def _sources() -> list[Path]:
     build.generate()
     if not (build.GEN / "lss_guid.h").exists():
         build.build_fmu(quiet=True)
-    return [build.SRC / "test_harness.c", *build.model_sources(), build.GEN / "lss_vars.c"]
+    return [build.TESTING / "test_harness.c", *build.model_sources(), build.GEN / "lss_vars.c"]
 
 
 def _sanitizer_works(flags: list[str], tmp: Path) -> bool:
