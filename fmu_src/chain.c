@@ -3,60 +3,14 @@
 #include <string.h>
 
 #include "chain_internal.h"
+#include "params.h"
 
 #define GRAVITY 9.81
 
-static int bad(char *err, size_t errlen, const char *name, double v, const char *rule) {
-    snprintf(err, errlen, "%s = %.17g is invalid: %s", name, v, rule);
-    return 1;
-}
-
+/* The ranges come from the variable table (params.c); what is left here are
+ * the rules a range cannot say. */
 int chain_check_params(const LSSParams *p, char *err, size_t errlen) {
-    const struct { const char *name; double v; } cors[] = {
-        {"contact.e_JA", p->contact_e_JA}, {"contact.e_JR", p->contact_e_JR},
-        {"contact.e_SW", p->contact_e_SW}, {"contact.e_RW", p->contact_e_RW}};
-    for (int i = 0; i < 4; i++)
-        if (!(cors[i].v > 0.0 && cors[i].v <= 1.0))
-            return bad(err, errlen, cors[i].name, cors[i].v, "a coefficient of restitution must lie in (0, 1]");
-    if (p->contact_model < 1 || p->contact_model > 6) {
-        snprintf(err, errlen, "contact.model = %d is unknown: use 1 HC, 2 HW, 3 LW, 4 LN, 5 GZ or 6 FL",
-                 p->contact_model);
-        return 1;
-    }
-    if (!(p->contact_v_min > 0.0 && p->contact_v_min <= 10.0))
-        return bad(err, errlen, "contact.v_min", p->contact_v_min, "must lie in (0, 10] m/s");
-    if (!(fabs(p->chain_pretension) <= 0.5))
-        return bad(err, errlen, "chain.pretension", p->chain_pretension, "must be finite, |d| <= 0.5 m");
-    if (!(p->wheel_mu_roll >= 0.0 && p->wheel_mu_roll <= 0.5))
-        return bad(err, errlen, "wheel.mu_roll", p->wheel_mu_roll, "must lie in [0, 0.5]");
-    if (!(p->drive_Kp >= 0.0 && p->drive_Kp < 1e9))
-        return bad(err, errlen, "drive.Kp", p->drive_Kp, "must be finite and >= 0");
-    if (!(p->drive_Ki >= 0.0 && p->drive_Ki < 1e9))
-        return bad(err, errlen, "drive.Ki", p->drive_Ki, "must be finite and >= 0");
-    if (!(p->drive_F_max >= 0.0 && p->drive_F_max < 1e7))
-        return bad(err, errlen, "drive.F_max", p->drive_F_max, "must be finite and >= 0");
-    if (!(p->drive_motor_length > 0.0 && p->drive_motor_length <= 20.0))
-        return bad(err, errlen, "drive.motor_length", p->drive_motor_length, "must lie in (0, 20] m");
-    if (!(fabs(p->drive_v_ref) <= 20.0))
-        return bad(err, errlen, "drive.v_ref", p->drive_v_ref, "must be finite, |v| <= 20 m/s");
-    if (!(p->cart_mass_factor > 0.0 && p->cart_mass_factor <= 20.0))
-        return bad(err, errlen, "cart.mass_factor", p->cart_mass_factor,
-                   "must lie in (0, 20]: a cart needs a positive mass");
-    if (!(p->track_guide_gap >= -0.005 && p->track_guide_gap <= 0.05))
-        return bad(err, errlen, "track.guide_gap", p->track_guide_gap, "must lie in [-0.005, 0.05] m");
-    if (!(fabs(p->chain_v_init) <= 20.0))
-        return bad(err, errlen, "chain.v_init", p->chain_v_init, "must be finite, |v| <= 20 m/s");
-    if (p->chain_transducer < 0) {
-        snprintf(err, errlen, "chain.transducer = %d is invalid: must be >= 0", p->chain_transducer);
-        return 1;
-    }
-    if (!(p->solver_tolerance >= 1e-12 && p->solver_tolerance <= 0.1))
-        return bad(err, errlen, "solver.tolerance", p->solver_tolerance,
-                   "must lie in [1e-12, 0.1] (below 1e-12 the solver stalls in double precision)");
-    if (!(p->solver_h_max >= 1e-6 && p->solver_h_max <= 1.0))
-        return bad(err, errlen, "solver.h_max", p->solver_h_max,
-                   "must lie in [1e-6, 1] s (a smaller step would stall the solver)");
-    return effects_check_params(p, err, errlen);
+    return params_check_ranges(p, err, errlen);
 }
 
 static int is_path(const char *name) {

@@ -9,16 +9,6 @@
 #include "chain_internal.h"
 #include "effects.h"
 
-static int bad(char *err, size_t errlen, const char *name, double v, const char *rule) {
-    snprintf(err, errlen, "%s = %.17g is invalid: %s", name, v, rule);
-    return 1;
-}
-
-static int bad_int(char *err, size_t errlen, const char *name, int v, const char *rule) {
-    snprintf(err, errlen, "%s = %d is invalid: %s", name, v, rule);
-    return 1;
-}
-
 /* The sensor parameters in the order of the force channels. */
 static void sensor_params(const LSSParams *p, double *g, double *o) {
     const double gg[FX_N_SENSOR] = {
@@ -32,68 +22,6 @@ static void sensor_params(const LSSParams *p, double *g, double *o) {
         p->effects_sensor_offset_driving_F_right};
     memcpy(g, gg, sizeof gg);
     memcpy(o, oo, sizeof oo);
-}
-
-static const char *const CHANNEL[FX_N_SENSOR] = {"joint.F_x", "joint.F_y", "joint.F_z", "steering.F_left",
-                                                 "steering.F_right", "driving.F_left", "driving.F_right"};
-
-int effects_check_params(const LSSParams *p, char *err, size_t errlen) {
-    if (!(p->effects_wheel_oor_amplitude >= 0.0 && p->effects_wheel_oor_amplitude <= 0.005))
-        return bad(err, errlen, "effects.wheel_oor.amplitude", p->effects_wheel_oor_amplitude,
-                   "must lie in [0, 0.005] m");
-    if (p->effects_wheel_oor_order < 1 || p->effects_wheel_oor_order > 8)
-        return bad_int(err, errlen, "effects.wheel_oor.order", p->effects_wheel_oor_order,
-                       "the number of lobes must lie in 1..8");
-    if (!isfinite(p->effects_wheel_oor_phase_left))
-        return bad(err, errlen, "effects.wheel_oor.phase_left", p->effects_wheel_oor_phase_left, "must be finite");
-    if (!isfinite(p->effects_wheel_oor_phase_right))
-        return bad(err, errlen, "effects.wheel_oor.phase_right", p->effects_wheel_oor_phase_right, "must be finite");
-    if (p->effects_wheel_oor_cart < -1)
-        return bad_int(err, errlen, "effects.wheel_oor.cart", p->effects_wheel_oor_cart,
-                       "must be -1 (the transducer cart) or a cart index 0..N-1");
-    if (!(fabs(p->effects_track_bump_height) <= 0.005))
-        return bad(err, errlen, "effects.track_bump.height", p->effects_track_bump_height,
-                   "must lie in [-0.005, 0.005] m");
-    if (!(p->effects_track_bump_s >= 0.0 && p->effects_track_bump_s < 1e9))
-        return bad(err, errlen, "effects.track_bump.s", p->effects_track_bump_s,
-                   "must lie in [0, track length) m");
-    if (!(p->effects_track_bump_length > 0.0 && p->effects_track_bump_length <= 5.0))
-        return bad(err, errlen, "effects.track_bump.length", p->effects_track_bump_length, "must lie in (0, 5] m");
-    if (!(p->effects_joint_clearance_gap >= 0.0 && p->effects_joint_clearance_gap <= 0.005))
-        return bad(err, errlen, "effects.joint_clearance.gap", p->effects_joint_clearance_gap,
-                   "must lie in [0, 0.005] m");
-    if (!(p->effects_motor_ripple_amplitude >= 0.0 && p->effects_motor_ripple_amplitude <= 1000.0))
-        return bad(err, errlen, "effects.motor_ripple.amplitude", p->effects_motor_ripple_amplitude,
-                   "must lie in [0, 1000] N");
-    if (!(p->effects_motor_ripple_pitch > 0.0 && p->effects_motor_ripple_pitch <= 2.0))
-        return bad(err, errlen, "effects.motor_ripple.pitch", p->effects_motor_ripple_pitch, "must lie in (0, 2] m");
-    if (!isfinite(p->effects_motor_ripple_phase))
-        return bad(err, errlen, "effects.motor_ripple.phase", p->effects_motor_ripple_phase, "must be finite");
-    if (!(p->effects_resistance_c1 >= 0.0 && isfinite(p->effects_resistance_c1)))
-        return bad(err, errlen, "effects.resistance.c1", p->effects_resistance_c1, "must be finite and >= 0");
-    if (!(p->effects_resistance_c2 >= 0.0 && isfinite(p->effects_resistance_c2)))
-        return bad(err, errlen, "effects.resistance.c2", p->effects_resistance_c2, "must be finite and >= 0");
-    double g[FX_N_SENSOR], o[FX_N_SENSOR];
-    char name[64];
-    sensor_params(p, g, o);
-    for (int k = 0; k < FX_N_SENSOR; k++) {
-        if (!(g[k] > -0.5 && g[k] < 0.5)) {
-            snprintf(name, sizeof name, "effects.sensor.gain.%s", CHANNEL[k]);
-            return bad(err, errlen, name, g[k], "a relative gain error must lie in (-0.5, 0.5)");
-        }
-        if (!(fabs(o[k]) <= 1e4)) {
-            snprintf(name, sizeof name, "effects.sensor.offset.%s", CHANNEL[k]);
-            return bad(err, errlen, name, o[k], "must be finite, |o| <= 1e4 N");
-        }
-    }
-    if (!(p->effects_mass_transducer_factor > 0.2 && p->effects_mass_transducer_factor <= 5.0))
-        return bad(err, errlen, "effects.mass.transducer_factor", p->effects_mass_transducer_factor,
-                   "must lie in (0.2, 5]");
-    if (!(p->effects_mass_spread >= 0.0 && p->effects_mass_spread <= 0.3))
-        return bad(err, errlen, "effects.mass.spread", p->effects_mass_spread, "must lie in [0, 0.3]");
-    if (p->effects_mass_seed < 0)
-        return bad_int(err, errlen, "effects.mass.seed", p->effects_mass_seed, "must be >= 0");
-    return 0;
 }
 
 int effects_init(Effects *fx, const LSSParams *p, int n_carts, int transducer, double r_drive,

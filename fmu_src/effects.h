@@ -39,10 +39,6 @@ typedef struct {
     int mass_on;
 } Effects;
 
-/* Checks the effect parameters that do not depend on the layout; 0 or a
- * message naming the variable and the value. */
-int effects_check_params(const LSSParams *p, char *err, size_t errlen);
-
 /* Fills fx from checked parameters; checks what needs the chain (cart
  * index, bump position against the track length). 0 or a message. */
 int effects_init(Effects *fx, const LSSParams *p, int n_carts, int transducer, double r_drive,

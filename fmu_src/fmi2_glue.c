@@ -1,5 +1,6 @@
 /* FMI 2.0 Co-Simulation entry points: instance life cycle, the state machine,
- * get/set through the generated variable table, FMU state copies, logging.
+ * get/set through the generated variable table, logging (FMU state copies
+ * and their format: fmu_state.c).
  * No physics here: the chain is reached through chain.h only. The instance
  * holds everything; there is no global mutable state. */
 #include <math.h>
@@ -7,48 +8,13 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "fmi2Functions.h"
-#include "chain.h"
+#include "fmi2_instance.h"
+#include "params.h"
 #include "lss_guid.h"
-#include "lss_vars.h"
-
-typedef enum {
-    ST_INSTANTIATED = 1, ST_INIT = 2, ST_STEP_COMPLETE = 4, ST_STEP_FAILED = 8,
-    ST_TERMINATED = 16, ST_ERROR = 32
-} ModelState;
-
-#define ST_ANY (ST_INSTANTIATED | ST_INIT | ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED | ST_ERROR)
-#define ST_READ (ST_INIT | ST_STEP_COMPLETE | ST_STEP_FAILED | ST_TERMINATED | ST_ERROR)
-
-typedef struct {
-    char name[256];
-    char resource_dir[LSS_STRING_MAX];
-    int has_resources;
-    fmi2CallbackFunctions cb;
-    LSSAlloc alloc;
-    int log_all;
-    ModelState state;
-    LSSParams p;
-    LSSOutputs out;
-    Chain *chain;
-    int chain_stale;        /* parameters changed since the chain was built */
-    int outputs_stale;
-    double start_time, time;
-    int tolerance_defined;
-    double tolerance;
-    int stop_time_defined;
-    double stop_time;
-    char string_out[LSS_STRING_MAX];
-} Instance;
-
-/* Below this relative tolerance the Runge-Kutta pair cannot make progress in
- * double precision (1e-16 already needs ~1e5 steps per 10 ms); a smaller
- * tolerance from fmi2SetupExperiment is raised to it with a warning. */
-#define TOL_FLOOR 1e-12
 
 /* --- logging --------------------------------------------------------------- */
 
-static void logmsg(const Instance *in, fmi2Status status, const char *category, const char *fmt, ...) {
+void lss_log(const Instance *in, fmi2Status status, const char *category, const char *fmt, ...) {
     if (!in || !in->cb.logger) return;
     if (status == fmi2OK && !in->log_all) return;
     char buf[1024];
@@ -68,9 +34,7 @@ static void logmsg(const Instance *in, fmi2Status status, const char *category, 
     in->cb.logger(in->cb.componentEnvironment, in->name, status, category, esc);
 }
 
-#define LOG_ERROR(in, ...) logmsg(in, fmi2Error, "logStatusError", __VA_ARGS__)
-
-static const char *state_name(ModelState s) {
+const char *lss_state_name(ModelState s) {
     switch (s) {
     case ST_INSTANTIATED: return "Instantiated";
     case ST_INIT: return "Initialization Mode";
@@ -82,16 +46,11 @@ static const char *state_name(ModelState s) {
     return "?";
 }
 
-static int allowed(Instance *in, const char *fn, int mask) {
+int lss_allowed(Instance *in, const char *fn, int mask) {
     if (in->state & mask) return 1;
-    LOG_ERROR(in, "%s() may not be called in state %s", fn, state_name(in->state));
+    LOG_ERROR(in, "%s() may not be called in state %s", fn, lss_state_name(in->state));
     return 0;
 }
-
-#define CHECK(c, fn, mask)                          \
-    Instance *in = (Instance *)(c);                 \
-    if (!in) return fmi2Error;                      \
-    if (!allowed(in, fn, mask)) return fmi2Error;
 
 /* --- resources ------------------------------------------------------------- */
 
@@ -160,7 +119,7 @@ static fmi2Status build_chain(Instance *in) {
     return fmi2OK;
 }
 
-static fmi2Status ensure_outputs(Instance *in) {
+fmi2Status lss_ensure_outputs(Instance *in) {
     if (!in->chain || in->chain_stale) {
         if (build_chain(in) != fmi2OK) return fmi2Error;
     }
@@ -236,7 +195,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         if (decode_file_uri(fmuResourceLocation, in->resource_dir, sizeof in->resource_dir) == 0)
             in->has_resources = 1;
         else
-            logmsg(in, fmi2Warning, "logStatusWarning",
+            lss_log(in, fmi2Warning, "logStatusWarning",
                    "cannot use resource location \"%s\": built-in layouts unavailable", fmuResourceLocation);
     }
     return in;
@@ -266,7 +225,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     }
     fmi2Status status = fmi2OK;
     if (toleranceDefined && tolerance < TOL_FLOOR) {
-        logmsg(in, fmi2Warning, "logStatusWarning",
+        lss_log(in, fmi2Warning, "logStatusWarning",
                "fmi2SetupExperiment: tolerance = %g is below %g, the smallest the solver can honour in "
                "double precision; using %g", tolerance, TOL_FLOOR, TOL_FLOOR);
         tolerance = TOL_FLOOR;
@@ -351,10 +310,10 @@ static fmi2Status begin_get(Instance *in, const char *fn, const fmi2ValueReferen
     if (needs_outputs) {
         if (!(in->state & ST_READ)) {
             LOG_ERROR(in, "%s: outputs and calculated parameters can be read from Initialization Mode on, "
-                      "not in state %s", fn, state_name(in->state));
+                      "not in state %s", fn, lss_state_name(in->state));
             return fmi2Error;
         }
-        return ensure_outputs(in);
+        return lss_ensure_outputs(in);
     }
     return fmi2OK;
 }
@@ -391,7 +350,7 @@ static int settable(Instance *in, const char *fn, const LSSVarInfo *v) {
     int mask = ST_INSTANTIATED | ST_INIT;
     if (v->causality == LSS_INPUT || v->variability == LSS_TUNABLE) mask |= ST_STEP_COMPLETE;
     if (!(in->state & mask)) {
-        LOG_ERROR(in, "%s: %s cannot be set in state %s%s", fn, v->name, state_name(in->state),
+        LOG_ERROR(in, "%s: %s cannot be set in state %s%s", fn, v->name, lss_state_name(in->state),
                   v->variability == LSS_FIXED ? " (a fixed parameter: set it before fmi2ExitInitializationMode)" : "");
         return 0;
     }
@@ -418,15 +377,6 @@ static fmi2Status commit(Instance *in, const char *fn, const LSSParams *backup, 
 static fmi2Status set_number(Instance *in, const char *fn, fmi2ValueReference vr, LSSType type, double x) {
     const LSSVarInfo *v = lookup(in, fn, vr, type);
     if (!v || !settable(in, fn, v)) return fmi2Error;
-    if (type == LSS_REAL && !isfinite(x)) {
-        LOG_ERROR(in, "%s: %s = %g is not a finite number", fn, v->name, x);
-        return fmi2Error;
-    }
-    if ((v->has_min && x < v->min) || (v->has_max && x > v->max)) {
-        LOG_ERROR(in, "%s: %s = %.17g is outside [%g, %g]", fn, v->name, x, v->has_min ? v->min : -INFINITY,
-                  v->has_max ? v->max : INFINITY);
-        return fmi2Error;
-    }
     LSSParams backup = in->p;
     void *slot = slot_of(in, v);
     if (type == LSS_REAL) *(double *)slot = x;
@@ -521,12 +471,12 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     if (chain_step(in->chain, t + h - in->start_time, err, sizeof err) != 0) {
         in->state = ST_STEP_FAILED;
         in->outputs_stale = 1;
-        logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2DoStep from t = %g: %s", t, err);
+        lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2DoStep from t = %g: %s", t, err);
         return fmi2Discard;
     }
     in->time = t + h;
     in->outputs_stale = 1;
-    logmsg(in, fmi2OK, "logAll", "fmi2DoStep to t = %g: %ld steps, %ld rejected, last step %g s",
+    lss_log(in, fmi2OK, "logAll", "fmi2DoStep to t = %g: %ld steps, %ld rejected, last step %g s",
            in->time, in->chain->st.ode.n_steps, in->chain->st.ode.n_rejected, in->chain->st.ode.h_last);
     return fmi2OK;
 }
@@ -540,7 +490,7 @@ fmi2Status fmi2CancelStep(fmi2Component c) {
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
     CHECK(c, "fmi2GetStatus", ST_ANY);
     (void)s; (void)value;
-    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetStatus: no asynchronous step is pending");
+    lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2GetStatus: no asynchronous step is pending");
     return fmi2Discard;
 }
 
@@ -554,14 +504,14 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *
         *value = in->time;
         return fmi2OK;
     }
-    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
+    lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2GetRealStatus: only fmi2LastSuccessfulTime is available");
     return fmi2Discard;
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
     CHECK(c, "fmi2GetIntegerStatus", ST_ANY);
     (void)s; (void)value;
-    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetIntegerStatus: no integer status is available");
+    lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2GetIntegerStatus: no integer status is available");
     return fmi2Discard;
 }
 
@@ -575,14 +525,14 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
         *value = fmi2False;  /* the model never asks to stop */
         return fmi2OK;
     }
-    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetBooleanStatus: only fmi2Terminated is available");
+    lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2GetBooleanStatus: only fmi2Terminated is available");
     return fmi2Discard;
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
     CHECK(c, "fmi2GetStringStatus", ST_ANY);
     (void)s; (void)value;
-    logmsg(in, fmi2Discard, "logStatusDiscard", "fmi2GetStringStatus: no string status is available");
+    lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2GetStringStatus: no string status is available");
     return fmi2Discard;
 }
 
@@ -609,315 +559,6 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
     LOG_ERROR(in, "fmi2GetDirectionalDerivative: LSSChain provides no directional derivatives");
     return fmi2Error;
-}
-
-/* --- FMU state ----------------------------------------------------------------- */
-
-#define SNAP_MAGIC 0x4C5353434841494EULL /* "LSSCHAIN" */
-#define SNAP_VERSION 2
-
-typedef struct {
-    unsigned long long magic;
-    int version;
-    char guid[40];          /* the build that wrote it: a state is only valid for the same binary */
-    int state;
-    int has_chain;
-    int has_out;            /* out holds the outputs at this state */
-    int tolerance_defined;
-    int stop_time_defined;
-    double tolerance, start_time, time, stop_time;
-    size_t n;               /* doubles in the chain snapshot */
-    LSSParams p;
-    LSSParams built;        /* parameters the chain was built with (tolerance applied) */
-    LSSOutputs out;         /* outputs as the master saw them: re-evaluating them after a restore
-                               could differ in the last bit (projection warm starts) */
-} SnapHeader;
-
-typedef struct {
-    SnapHeader h;
-    double data[];
-} Snapshot;
-
-static int is_snapshot(const void *s) {
-    const SnapHeader *h = s;
-    return h->magic == SNAP_MAGIC && h->version == SNAP_VERSION;
-}
-
-static int same_build(const SnapHeader *h) {
-    return memchr(h->guid, 0, sizeof h->guid) && strcmp(h->guid, LSS_GUID) == 0;
-}
-
-/* Do two parameter sets give chains of the same structure (all fixed
- * parameters equal, bit for bit)? Tunables and inputs are re-applied. */
-static int same_structure(const LSSParams *a, const LSSParams *b) {
-    for (int vr = 1; vr <= LSS_N_VARS; vr++) {
-        const LSSVarInfo *v = &LSS_VARS[vr];
-        if (!v->in_params || v->variability != LSS_FIXED) continue;
-        const char *x = (const char *)a + v->offset, *y = (const char *)b + v->offset;
-        if (v->type == LSS_STRING ? strcmp(x, y) != 0
-                                  : memcmp(x, y, v->type == LSS_REAL ? sizeof(double) : sizeof(int)) != 0)
-            return 0;
-    }
-    return 1;
-}
-
-static int params_terminated(const LSSParams *p) {
-    for (int vr = 1; vr <= LSS_N_VARS; vr++) {
-        const LSSVarInfo *v = &LSS_VARS[vr];
-        if (v->in_params && v->type == LSS_STRING && !memchr((const char *)p + v->offset, 0, LSS_STRING_MAX))
-            return 0;
-    }
-    return 1;
-}
-
-static int valid_state(int s) {
-    return s == ST_INSTANTIATED || s == ST_INIT || s == ST_STEP_COMPLETE || s == ST_STEP_FAILED ||
-           s == ST_TERMINATED || s == ST_ERROR;
-}
-
-/* Is the header usable (it may come from bytes handed in by the master)?
- * 0, or 1 with the reason in why. */
-static int check_header(const SnapHeader *h, char *why, size_t len) {
-    char err[512];
-    if (!is_snapshot(h)) {
-        snprintf(why, len, "not an LSSChain FMU state of this version");
-        return 1;
-    }
-    if (!same_build(h)) {
-        snprintf(why, len, "the FMU state was written by another build of LSSChain (GUID differs)");
-        return 1;
-    }
-    if (!valid_state(h->state) || (h->has_chain != 0 && h->has_chain != 1) ||
-        (h->has_out != 0 && h->has_out != h->has_chain) ||
-        (h->tolerance_defined != 0 && h->tolerance_defined != 1) ||
-        (h->stop_time_defined != 0 && h->stop_time_defined != 1)) {
-        snprintf(why, len, "corrupt FMU state: flags out of range");
-        return 1;
-    }
-    if ((h->has_chain != 0) != (h->n != 0) ||
-        (!h->has_chain && (h->state & (ST_STEP_COMPLETE | ST_STEP_FAILED)))) {
-        snprintf(why, len, "corrupt FMU state: a state in %s without the chain's state", state_name(h->state));
-        return 1;
-    }
-    if (!isfinite(h->start_time) || !isfinite(h->time) || (h->stop_time_defined && !isfinite(h->stop_time)) ||
-        (h->tolerance_defined && !(h->tolerance >= TOL_FLOOR && h->tolerance <= 0.1))) {
-        snprintf(why, len, "corrupt FMU state: non-finite time or tolerance out of range");
-        return 1;
-    }
-    if (!params_terminated(&h->p) || !params_terminated(&h->built)) {
-        snprintf(why, len, "corrupt FMU state: unterminated string parameter");
-        return 1;
-    }
-    if (chain_check_params(&h->p, err, sizeof err) || (h->has_chain && chain_check_params(&h->built, err, sizeof err))) {
-        snprintf(why, len, "FMU state with invalid parameters: %s", err);
-        return 1;
-    }
-    return 0;
-}
-
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    CHECK(c, "fmi2GetFMUstate", ST_ANY);
-    if (!FMUstate) {
-        LOG_ERROR(in, "fmi2GetFMUstate: FMUstate is NULL");
-        return fmi2Error;
-    }
-    Snapshot *s = *FMUstate;
-    if (s && !is_snapshot(s)) {
-        LOG_ERROR(in, "fmi2GetFMUstate: *FMUstate is neither NULL nor an LSSChain FMU state");
-        return fmi2Error;
-    }
-    int has = in->chain && !in->chain_stale;
-    size_t n = has ? chain_state_size(in->chain) : 0;
-    if (has && ensure_outputs(in) != fmi2OK) return fmi2Error;  /* cannot fail: the chain exists */
-    if (s && s->h.n != n) {  /* an old snapshot of another size: replace it */
-        in->cb.freeMemory(s);
-        s = NULL;
-        *FMUstate = NULL;
-    }
-    if (!s) s = in->cb.allocateMemory(1, sizeof(SnapHeader) + n * sizeof(double));
-    if (!s) {
-        LOG_ERROR(in, "fmi2GetFMUstate: out of memory");
-        return fmi2Error;
-    }
-    s->h.magic = SNAP_MAGIC;
-    s->h.version = SNAP_VERSION;
-    memset(s->h.guid, 0, sizeof s->h.guid);
-    snprintf(s->h.guid, sizeof s->h.guid, "%s", LSS_GUID);
-    s->h.state = in->state;
-    s->h.has_chain = has;
-    s->h.has_out = has;
-    if (has) s->h.out = in->out;
-    s->h.tolerance_defined = in->tolerance_defined;
-    s->h.tolerance = in->tolerance;
-    s->h.stop_time_defined = in->stop_time_defined;
-    s->h.stop_time = in->stop_time;
-    s->h.start_time = in->start_time;
-    s->h.time = in->time;
-    s->h.n = n;
-    s->h.p = in->p;
-    s->h.built = in->p;
-    if (in->tolerance_defined) s->h.built.solver_tolerance = in->tolerance;
-    if (has) chain_state_save(in->chain, s->data);
-    *FMUstate = s;
-    return fmi2OK;
-}
-
-/* All or nothing: on an error the instance is left as it was. */
-static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
-    char why[600];
-    if (check_header(&s->h, why, sizeof why)) {
-        LOG_ERROR(in, "%s: %s", fn, why);
-        return fmi2Error;
-    }
-    Chain *fresh = NULL;
-    if (s->h.has_chain) {
-        LSSParams now = in->p;
-        if (in->tolerance_defined) now.solver_tolerance = in->tolerance;
-        int same = in->chain && !in->chain_stale && chain_state_size(in->chain) == s->h.n &&
-                   same_structure(&now, &s->h.built);
-        if (!same) {  /* build a chain of the snapshot's structure, then load its state */
-            char err[1024];
-            fresh = chain_create(&s->h.built, in->has_resources ? in->resource_dir : NULL, &in->alloc, err,
-                                 sizeof err);
-            if (!fresh) {
-                LOG_ERROR(in, "%s: cannot rebuild the chain of the FMU state: %s", fn, err);
-                return fmi2Error;
-            }
-            if (chain_state_size(fresh) != s->h.n) {
-                chain_free(fresh);
-                LOG_ERROR(in, "%s: the FMU state does not fit the chain it describes", fn);
-                return fmi2Error;
-            }
-        }
-    }
-    /* from here on nothing fails */
-    if (fresh) {
-        chain_free(in->chain);
-        in->chain = fresh;
-    }
-    in->p = s->h.p;
-    in->tolerance_defined = s->h.tolerance_defined;
-    in->tolerance = s->h.tolerance;
-    in->stop_time_defined = s->h.stop_time_defined;
-    in->stop_time = s->h.stop_time;
-    in->start_time = s->h.start_time;
-    in->time = s->h.time;
-    in->outputs_stale = 1;
-    if (s->h.has_chain) {
-        chain_state_load(in->chain, s->data);
-        chain_set_inputs(in->chain, &in->p);
-        in->chain_stale = 0;
-        if (s->h.has_out) {
-            in->out = s->h.out;
-            in->outputs_stale = 0;
-        }
-    } else {
-        in->chain_stale = 1;
-    }
-    in->state = (ModelState)s->h.state;
-    return fmi2OK;
-}
-
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    CHECK(c, "fmi2SetFMUstate", ST_ANY);
-    if (!FMUstate) {
-        LOG_ERROR(in, "fmi2SetFMUstate: FMUstate is NULL");
-        return fmi2Error;
-    }
-    return restore(in, (const Snapshot *)FMUstate, "fmi2SetFMUstate");
-}
-
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    CHECK(c, "fmi2FreeFMUstate", ST_ANY);
-    if (!FMUstate) {
-        LOG_ERROR(in, "fmi2FreeFMUstate: FMUstate is NULL");
-        return fmi2Error;
-    }
-    if (*FMUstate && !is_snapshot(*FMUstate)) {
-        LOG_ERROR(in, "fmi2FreeFMUstate: *FMUstate is not an LSSChain FMU state; not freed");
-        return fmi2Error;
-    }
-    if (*FMUstate) {
-        ((Snapshot *)*FMUstate)->h.magic = 0;  /* poisoned: a stale copy of the pointer is not a state */
-        in->cb.freeMemory(*FMUstate);
-    }
-    *FMUstate = NULL;
-    return fmi2OK;
-}
-
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
-    CHECK(c, "fmi2SerializedFMUstateSize", ST_ANY);
-    if (!FMUstate || !size) {
-        LOG_ERROR(in, "fmi2SerializedFMUstateSize: NULL argument");
-        return fmi2Error;
-    }
-    if (!is_snapshot(FMUstate)) {
-        LOG_ERROR(in, "fmi2SerializedFMUstateSize: not an LSSChain FMU state");
-        return fmi2Error;
-    }
-    const Snapshot *s = FMUstate;
-    *size = sizeof(SnapHeader) + s->h.n * sizeof(double);
-    return fmi2OK;
-}
-
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
-    CHECK(c, "fmi2SerializeFMUstate", ST_ANY);
-    if (!FMUstate || !serializedState) {
-        LOG_ERROR(in, "fmi2SerializeFMUstate: NULL argument");
-        return fmi2Error;
-    }
-    if (!is_snapshot(FMUstate)) {
-        LOG_ERROR(in, "fmi2SerializeFMUstate: not an LSSChain FMU state");
-        return fmi2Error;
-    }
-    const Snapshot *s = FMUstate;
-    size_t need = sizeof(SnapHeader) + s->h.n * sizeof(double);
-    if (size < need) {
-        LOG_ERROR(in, "fmi2SerializeFMUstate: buffer of %zu bytes, %zu needed", size, need);
-        return fmi2Error;
-    }
-    memcpy(serializedState, s, need);
-    return fmi2OK;
-}
-
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
-                                   fmi2FMUstate *FMUstate) {
-    CHECK(c, "fmi2DeSerializeFMUstate", ST_ANY);
-    if (!serializedState || !FMUstate) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: NULL argument");
-        return fmi2Error;
-    }
-    if (*FMUstate && !is_snapshot(*FMUstate)) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: *FMUstate is neither NULL nor an LSSChain FMU state");
-        return fmi2Error;
-    }
-    SnapHeader h;
-    if (size < sizeof h) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: %zu bytes is too short for an LSSChain FMU state", size);
-        return fmi2Error;
-    }
-    memcpy(&h, serializedState, sizeof h);
-    if (!is_snapshot(&h) || h.n > (size - sizeof h) / sizeof(double) || size != sizeof h + h.n * sizeof(double)) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: the %zu bytes are not an LSSChain FMU state of this version", size);
-        return fmi2Error;
-    }
-    char why[600];
-    if (check_header(&h, why, sizeof why)) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: %s", why);
-        return fmi2Error;
-    }
-    Snapshot *s = in->cb.allocateMemory(1, size);
-    if (!s) {
-        LOG_ERROR(in, "fmi2DeSerializeFMUstate: out of memory");
-        return fmi2Error;
-    }
-    memcpy(s, serializedState, size);
-    if (*FMUstate) {
-        ((Snapshot *)*FMUstate)->h.magic = 0;
-        in->cb.freeMemory(*FMUstate);
-    }
-    *FMUstate = s;
-    return fmi2OK;
 }
 
 /* --- model exchange: not provided, but exported so every entry point exists --- */

@@ -23,6 +23,7 @@ from .variables import VARIABLES, Var
 
 ROOT = Path(__file__).resolve().parent.parent
 SRC = ROOT / "fmu_src"
+FMI_GLUE = ("fmi2_glue.c", "fmu_state.c")   # the FMI layer: not in the core library of the tests
 TESTING = SRC / "testing"     # the flat C API of tests and benchmarks, and the C harness: never in the FMU
 BUILD = ROOT / "build"
 GEN = BUILD / "gen"

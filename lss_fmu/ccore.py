@@ -35,7 +35,7 @@ def _stale(out: Path, inputs: list[Path]) -> bool:
 def load():
     """(ffi, lib) for the C core, rebuilt when a source is newer than the library."""
     build.generate()
-    sources = ([p for p in build.model_sources() if p.name != "fmi2_glue.c"] + build.testing_sources()
+    sources = ([p for p in build.model_sources() if p.name not in build.FMI_GLUE] + build.testing_sources()
                + [build.GEN / "lss_vars.c"])
     headers = sorted(build.SRC.glob("*.h")) + sorted(build.TESTING.glob("*.h"))
     if _stale(CORE_LIB, sources + headers):

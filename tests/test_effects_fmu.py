@@ -405,8 +405,8 @@ BAD = [
     ("effects.joint_clearance.gap", 0.0051), ("effects.motor_ripple.amplitude", 1001.0),
     ("effects.motor_ripple.pitch", 0.0), ("effects.motor_ripple.phase", float("nan")),
     ("effects.resistance.c1", -1.0), ("effects.resistance.c2", float("nan")),
-    ("effects.sensor.gain.joint.F_x", 0.5), ("effects.sensor.gain.driving.F_right", -0.5),
-    ("effects.sensor.offset.steering.F_left", 1e4 + 1), ("effects.mass.transducer_factor", 0.2),
+    ("effects.sensor.gain.joint.F_x", 0.51), ("effects.sensor.gain.driving.F_right", -0.51),
+    ("effects.sensor.offset.steering.F_left", 1e4 + 1), ("effects.mass.transducer_factor", 0.19),
     ("effects.mass.transducer_factor", 5.01), ("effects.mass.spread", 0.31), ("effects.mass.seed", -1),
 ]
 

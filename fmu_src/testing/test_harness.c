@@ -299,7 +299,7 @@ static void write_file(const char *path, const char *text) {
 
 static void error_path(Env *env, const Opts *o, int kind) {
     fmi2CallbackFunctions cb = {h_logger, h_calloc, h_free, NULL, env};
-    fmi2ValueReference vr_s = VR_LAYOUT_NAME, vr_t = VR_CHAIN_TRANSDUCER, vr_m = VR_CART_MASS_FACTOR;
+    fmi2ValueReference vr_s = VR_LAYOUT_NAME, vr_t = VR_CHAIN_TRANSDUCER, vr_dm[2] = {VR_CHAIN_PRETENSION, VR_CART_MASS_FACTOR};
     fmi2ValueReference vr_out = VR_CHAIN_V_MEAN;
     char path[700];
     fmi2String name = path;
@@ -363,11 +363,15 @@ static void error_path(Env *env, const Opts *o, int kind) {
         CALL(fmi2Error, fmi2ExitInitializationMode(c));
         fmi2FreeInstance(c);
         break;
-    case 7: {  /* a state that turns non-finite: fmi2Discard, then only reads, terminate */
+    case 7: {  /* a step that cannot be made (layout 7 with carts of 1/1000 of their
+                  mass in a chain half a metre too long: legal, absurd; the step
+                  collapses at once): fmi2Discard, then only reads, terminate */
         c = instantiate(env, &cb, o->uri);
         if (!c) return;
-        fmi2Real tiny = 1e-300;
-        CALL(fmi2OK, fmi2SetReal(c, &vr_m, 1, &tiny));
+        fmi2Real crushed[2] = {-0.5, 1e-3};
+        fmi2String lay7 = "layout7";
+        CALL(fmi2OK, fmi2SetString(c, &vr_s, 1, &lay7));
+        CALL(fmi2OK, fmi2SetReal(c, vr_dm, 2, crushed));
         CALL(fmi2OK, fmi2EnterInitializationMode(c));
         CALL(fmi2OK, fmi2ExitInitializationMode(c));
         CALL(fmi2Discard, fmi2DoStep(c, 0.0, o->h, fmi2True));
