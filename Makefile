@@ -23,7 +23,7 @@ fmu: $(STAMP)
 	$(VPY) -m lss_fmu.build
 
 demo: fmu
-	$(VPY) -m lss_fmu.demo --out demo_out
+	$(VENV)/bin/lss demo --out demo_out
 
 test: fmu
 	$(VPY) -m pytest -q -p no:cacheprovider -n $(JOBS) tests

@@ -33,7 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from identification.campaign import run_campaign  # noqa: E402
-from identification.report import load_results, model_tests, write_report  # noqa: E402
+from identification.stats import load_results, model_tests  # noqa: E402
+from lss_app.campaign_report import write_report  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.rig import generate_set  # noqa: E402
 

@@ -43,7 +43,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 for p in (ROOT, ROOT / "benchmarks"):
@@ -54,7 +53,6 @@ from bench_common import machine  # noqa: E402  (sets one BLAS thread first)
 
 import numpy as np  # noqa: E402
 
-import identification.problem as problem_mod  # noqa: E402
 from identification.problem import DESIGN, IdentificationProblem  # noqa: E402
 
 METHODS = ("complex-rf", "complex-rf-restart", "complex-rfp", "de", "cma-es")
@@ -80,30 +78,9 @@ TARGETS = (20.0, 5.0, 2.0)
 # the problem, on a pinned copy of the FMU
 # --------------------------------------------------------------------------
 
-_PINNED: dict[str, Any] = {"path": None}
-
-
-def _pinned_simulator():
-    """problem.simulator() on the pinned FMU copy: one instance per process
-    (worker processes forked by identify() inherit this function)."""
-    from lss_fmu.runner import ChainSimulator
-    pid = os.getpid()
-    sims = problem_mod._SIMULATORS
-    if pid not in sims:
-        for attempt in range(5):  # the FMU file is shared with concurrent rebuilds: retry
-            try:
-                sims[pid] = ChainSimulator(_PINNED["path"], instance_name=f"bench{pid}")
-                break
-            except Exception:  # noqa: BLE001
-                if attempt == 4:
-                    raise
-                time.sleep(1.0 + attempt)
-    return sims[pid]
-
-
 def pin_fmu(workdir: Path) -> dict:
-    """Copy build/LSSChain.fmu (built if missing) into `workdir` and make the
-    identification problem use the copy in this process and in its forks."""
+    """Copy build/LSSChain.fmu (built if missing) into `workdir`; the problem
+    then runs on the copy (release_problem(fmu["path"]))."""
     from lss_fmu.runner import fmu_path
     src = fmu_path()
     dst = Path(workdir) / "LSSChain.fmu"
@@ -117,15 +94,15 @@ def pin_fmu(workdir: Path) -> dict:
             if attempt == 4:
                 raise
             time.sleep(1.0 + attempt)
-    _PINNED["path"] = dst
-    problem_mod.simulator = _pinned_simulator
-    return {"fmu": str(src), "guid": guid, "bytes": dst.stat().st_size}
+    return {"fmu": str(src), "guid": guid, "bytes": dst.stat().st_size, "path": str(dst)}
 
 
-def release_problem() -> IdentificationProblem:
-    """The test's release transient (identification.synthetic.release_problem)."""
+def release_problem(fmu: str | None = None) -> IdentificationProblem:
+    """The test's release transient (identification.synthetic.release_problem),
+    simulated by the FMU at `fmu` (one instance per process)."""
     from identification.synthetic import release_problem as make
-    return make()
+    from lss_fmu.runner import LazySimulator
+    return make(sim=LazySimulator(fmu))
 
 
 # --------------------------------------------------------------------------
@@ -391,7 +368,7 @@ def main(argv: list[str] | None = None) -> int:
     w0, c0 = time.perf_counter(), _cpu()
     with tempfile.TemporaryDirectory(prefix="lss_bench_ident_") as tmp:
         fmu = pin_fmu(Path(tmp))
-        problem = release_problem()
+        problem = release_problem(fmu["path"])
         t_eval = time_one_evaluation(problem)
         f_truth = float(problem([TRUTH[k] for k in CORS]))
         f_x0 = float(problem(problem.x0_vector()))

@@ -31,15 +31,12 @@ log = logging.getLogger(__name__)
 
 def simulate_with(problem: IdentificationProblem, x, extra: Optional[dict] = None,
                   channels=None) -> np.ndarray:
-    """The problem's simulation at x with further FMU values set."""
-    from lss_fmu.triggered import simulate_triggered
-    from lss_fmu.variables import FORCE_CHANNELS
-
-    from .problem import simulator
-    params, s_m = problem.fmu_params(x)
-    params.update(extra or {})
-    return simulate_triggered(simulator(), params, s_m, problem.times, settle=problem.settle,
-                              tolerance=problem.tolerance, channels=channels or FORCE_CHANNELS)
+    """The problem's simulation at x with further FMU values set: the forces as
+    the objective sees them (through the logger's filter where declared), or
+    other `channels` as simulated."""
+    if channels is None:
+        return problem.simulate(x, extra)
+    return problem.run(x, extra, channels=channels)
 
 
 def weights(problem: IdentificationProblem) -> np.ndarray:
@@ -133,7 +130,7 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
         r = r - taken
     w = weights(problem)
     _, f_base = _lsq(r, [], w)
-    J = [_demean(g, demean) for g in base_jacobian(problem, x, sim0)] if base_columns else []
+    J = [demean_columns(g, demean) for g in base_jacobian(problem, x, sim0)] if base_columns else []
     _, f_J = _lsq(r, J, w)
     chosen = [CATALOGUE[e] for e in (effects or CATALOGUE)]
     todo = [(e, h) for e in chosen for h in e.hypotheses(ctx)]
@@ -144,7 +141,7 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
     scores, failed = [], []
     for effect, hyp in todo:
         try:
-            G = [_demean(g, demean) for g in _signatures(problem, x, sim0, hyp, bar)]
+            G = [demean_columns(g, demean) for g in _signatures(problem, x, sim0, hyp, bar)]
         except Exception as exc:
             log.warning("effect %s, %s: probe failed: %s", effect.name, hyp.label, exc)
             failed.append({"effect": effect.name, "hypothesis": hyp.label, "error": str(exc)[:300]})
@@ -160,7 +157,8 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
     return Attribution(f_base, f_J, ranking, scores, J, failed)
 
 
-def _demean(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def demean_columns(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """g with the mean of each masked channel (column) taken out: what the tare does to a residual."""
     if not mask.any():
         return g
     g = np.array(g, float)

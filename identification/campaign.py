@@ -12,10 +12,8 @@ results, no evaluation lost or counted twice.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import logging
-import sys
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,8 +59,11 @@ def run_task(task: Task) -> dict:
     problem = from_measurement(meas, task.model, free=task.free, window=task.window, settle=task.settle,
                                tare=task.tare)
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
-    res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path, progress=False,
-                   restarts=task.restarts)
+    try:
+        res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path,
+                       progress=False, restarts=task.restarts)
+    finally:
+        problem.sim.close()
     out = res.to_dict()
     out.update({"wheel_type": meas.meta.get("wheel_type"), "coupling_type": meas.meta.get("coupling_type"),
                 "number": meas.meta.get("number"), "measurement_dir": str(task.measurement)})
@@ -70,31 +71,27 @@ def run_task(task: Task) -> dict:
     return out
 
 
-def find_measurements(data_dir: Path) -> list[Path]:
-    data_dir = Path(data_dir)
-    if not data_dir.is_dir():
-        raise FileNotFoundError(f"no such measurement folder: {data_dir}")
-    found = sorted(p.parent for p in data_dir.glob("*/meta.json") if p.parent.name != "answers")
-    if not found:
-        raise FileNotFoundError(f"{data_dir} holds no measurement (no */meta.json)")
-    return found
-
-
 def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: int = 2,
                  scheduler: Optional[str] = None, max_evals: int = 5000, seed: int = 0,
                  window: Optional[float] = None, settle: float = 4.0, free: Optional[tuple] = None,
                  progress: bool = True, client=None, tare: bool = False, restarts: int = 0) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
-    from lss_fmu.variables import CONTACT_MODELS
-    for m in models:
-        if m not in CONTACT_MODELS:
-            raise ValueError(f"unknown contact model {m!r}: use one of {', '.join(CONTACT_MODELS)}")
+    from lss_fmu.design import parse_model
+    from lss_fmu.measurement import find_measurements
+    models = [parse_model(m) for m in models]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if int(restarts) < 0:
         raise ValueError(f"restarts = {restarts}: must be 0 or more")
+    folders = find_measurements(data_dir)
+    if not folders:
+        raise FileNotFoundError(f"{data_dir} holds no measurement (no meta.json in it or below)")
     tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts))
-             for p in find_measurements(data_dir) for m in models]
+             for p in folders for m in models]
+    twice = sorted({t.key for t in tasks if sum(u.key == t.key for u in tasks) > 1})
+    if twice:  # results are filed by folder name
+        raise ValueError(f"{data_dir}: measurement folders share a name ({', '.join(twice[:5])}); a campaign "
+                         f"files its results by folder name, so give each measurement its own")
     write_json_atomic(out / "campaign.json", {"data_dir": str(data_dir), "models": list(models),
                                               "max_evals": max_evals, "seed": seed, "window": window,
                                               "settle": settle, "free": list(free) if free else None,
@@ -130,36 +127,3 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
     if bar:
         bar.close()
     return [json.loads(t.result_path.read_text()) for t in tasks]
-
-
-def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="lss campaign", description=__doc__.splitlines()[0])
-    ap.add_argument("data_dir")
-    ap.add_argument("--models", default="HC,HW,LW,LN")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
-    ap.add_argument("--workers", type=int, default=2, help="local processes (without --scheduler)")
-    ap.add_argument("--max-evals", type=int, default=5000)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--window", type=float, default=None, help="use only the first seconds of each record")
-    ap.add_argument("--settle", type=float, default=4.0, help="simulated settling before the trigger is armed, s")
-    ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
-    ap.add_argument("--restarts", type=int, default=0,
-                    help="restart a converged complex around the best point up to N times (0: as published)")
-    ap.add_argument("--tare", action="store_true",
-                    help="take out zero errors within 3 sigma of the transducer's declared offset")
-    ap.add_argument("--no-progress", action="store_true")
-    args = ap.parse_args(argv)
-    from .cli import _free, _model
-    models = [_model(m) for m in args.models.split(",") if m.strip()]
-    free = _free(args.free) if args.free else None
-    results = run_campaign(Path(args.data_dir), models, Path(args.out), workers=args.workers,
-                           scheduler=args.scheduler, max_evals=args.max_evals, seed=args.seed,
-                           window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
-                           tare=args.tare, restarts=args.restarts)
-    print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

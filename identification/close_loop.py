@@ -8,15 +8,12 @@ vector and identify again from the previous optimum (identification.extension).
 The round is *confirmed* when the extended identification lowers f by at
 least CONFIRM; a second round starts from the extended model.
 
-    lss close-loop MEAS_DIR --model HW --out DIR [--base-evals N] [--max-evals N]
-                   [--window S] [--rounds 2] [--effects a,b] [--seed S]
-
-Every identification keeps a journal in DIR, the attribution of each round is
+From the command line: `lss close-loop` (lss_app.cmd_close_loop). Every
+identification keeps a journal in DIR, the attribution of each round is
 written atomically once done: a run killed at any point resumes where it was.
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import logging
@@ -28,12 +25,13 @@ from typing import Optional, Sequence
 import numpy as np
 
 from lss_fmu.atomic import write_json_atomic
+from lss_fmu.variables import FORCE_CHANNELS
 
 from .attribution import Attribution, attribute, simulate_with
 from .catalogue import CATALOGUE, Context
 from .extension import extended_problem, extension_of
 from .identify import identify
-from .problem import IdentificationProblem, nrmsd, tare_of, tared
+from .problem import IdentificationProblem, nrmsd, tared
 from .refine import refine
 
 log = logging.getLogger(__name__)
@@ -70,7 +68,7 @@ class Round:
     refined: dict = field(default_factory=dict)   # the local refinement of the extension: f before/after, runs
 
     def to_dict(self) -> dict:
-        chans = _channels()
+        chans = FORCE_CHANNELS
         return {
             "round": self.number, "verdict": self.verdict, "effect": self.effect, "confirmed": self.confirmed,
             "f_base": self.f_base, "nrmsd_base": dict(zip(chans, map(float, self.H_base))),
@@ -103,11 +101,6 @@ class CloseLoopResult:
                 "rounds": [r.to_dict() for r in self.rounds]}
 
 
-def _channels() -> list:
-    from lss_fmu.variables import FORCE_CHANNELS
-    return FORCE_CHANNELS
-
-
 def context(problem: IdentificationProblem, x: np.ndarray, sensor_offset_std: Optional[dict] = None) -> Context:
     """What the catalogue needs; `sensor_offset_std` (N per force channel) is the
     transducer's declared zero tolerance (meta.json 'sensor'), by default the
@@ -120,7 +113,7 @@ def context(problem: IdentificationProblem, x: np.ndarray, sensor_offset_std: Op
     ctx = Context(problem.layout, float(tr.length), np.asarray(tr.s0, float),
                   (s0, s0 + v * float(problem.times[-1])), int(tr.n_carts), v)
     if sensor_offset_std:
-        ctx.sensor_offset_tol = 3.0 * np.array([float(sensor_offset_std[c]) for c in _channels()])
+        ctx.sensor_offset_tol = 3.0 * np.array([float(sensor_offset_std[c]) for c in FORCE_CHANNELS])
     elif problem.tare is not None:
         ctx.sensor_offset_tol = np.asarray(problem.tare, float)
     return ctx
@@ -141,7 +134,7 @@ def localise(problem: IdentificationProblem, r: np.ndarray, s: Optional[np.ndarr
     win = c[n:] - c[:-n]
     i = int(np.argmax(win))
     share = float(win[i] / c[-1]) if c[-1] > 0 else 0.0
-    out = {"channel": _channels()[j], "channel_share": float(per_ch[j] / per_ch.sum()) if per_ch.sum() > 0 else 0.0,
+    out = {"channel": FORCE_CHANNELS[j], "channel_share": float(per_ch[j] / per_ch.sum()) if per_ch.sum() > 0 else 0.0,
            "t_start": float(t[i]), "t_end": float(t[i + n - 1]), "window_share": share,
            "window_fraction": n / len(t)}
     if s is not None:
@@ -175,12 +168,7 @@ def analyse(problem: IdentificationProblem, x: np.ndarray, sim: np.ndarray):
     sig = _signals(problem, x)
     tr = load_track(problem.layout)
     s = _unwrap(sig["transducer.s"], float(tr.length))
-    r_drive = None
-    try:
-        from .problem import simulator
-        r_drive = float(simulator().get("cart.r_drive"))
-    except Exception:
-        pass
+    r_drive = float(problem.model_constants(("cart.r_drive",))["cart.r_drive"])
     model_signals = {"v": sig["transducer.v"], "v_joint": sig["transducer.joint.v_axial"]}
     model_signals = {k: v for k, v in model_signals.items() if np.all(np.isfinite(v))}
     try:
@@ -354,98 +342,27 @@ def rescore(base: IdentificationProblem, x: np.ndarray, att: Attribution, f_base
     return fits
 
 
-# ---------------------------------------------------------------------------------------
-# command line
-
-def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="lss close-loop", description=__doc__.splitlines()[0])
-    ap.add_argument("measurement", help="measurement folder (samples.csv + meta.json)")
-    ap.add_argument("--model", required=True, help="contact model: HC, HW, LW, LN, GZ or FL")
-    ap.add_argument("--out", required=True, help="output folder (report.md, result.json, figures)")
-    ap.add_argument("--base-result", default=None,
-                    help="result.json of an earlier `lss identify` of this measurement and model (skips the "
-                         "base identification)")
-    ap.add_argument("--base-evals", type=int, default=300, help="evaluations of the base identification")
-    ap.add_argument("--max-evals", type=int, default=200, help="evaluations of each extended identification")
-    ap.add_argument("--free", default=None, help="base design variables, e.g. e_JA,e_JR,e_SW,e_RW (default all)")
-    ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
-    ap.add_argument("--fit-evals", type=int, default=RESCORE_EVALS,
-                    help="evaluations fitting each of the top candidate effects alone (raised to what the "
-                         "effect's complex needs)")
-    ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
-                    help="simulations of the local (Levenberg-Marquardt) refinement ending each extended "
-                         "identification (0: none)")
-    ap.add_argument("--rounds", type=int, default=2, help="rounds of the loop (each finds at most one effect)")
-    ap.add_argument("--effects", default=None, help=f"candidate effects (default all: {','.join(CATALOGUE)})")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--no-tare", action="store_true",
-                    help="compare forces as logged (Eq. 10-12 as is); by default a zero error within 3 sigma of "
-                         "the transducer's declared offset is taken out first")
-    ap.add_argument("--no-progress", action="store_true")
-    args = ap.parse_args(argv)
-
-    from lss_fmu.measurement import load_measurement
-
-    from .cli import _free, _model
-    from .close_loop_report import write_report
-    from .problem import from_measurement
-
-    for name, v in (("--base-evals", args.base_evals), ("--max-evals", args.max_evals), ("--rounds", args.rounds),
-                    ("--fit-evals", args.fit_evals)):
-        if v < 1:
-            raise ValueError(f"{name} {v}: must be at least 1")
-    if args.refine_evals < 0:
-        raise ValueError(f"--refine-evals {args.refine_evals}: must be at least 0")
-    effects = None
-    if args.effects:
-        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
-        bad = [e for e in effects if e not in CATALOGUE]
-        if bad:
-            raise ValueError(f"--effects: unknown {', '.join(bad)} (the catalogue: {', '.join(CATALOGUE)})")
-    model = _model(args.model)
-    meas = load_measurement(args.measurement)
-    problem = from_measurement(meas, model, free=_free(args.free), window=args.window, tare=not args.no_tare)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
-                        filename=str(out / "close_loop.log"))
-    x_base = None
-    if args.base_result:
-        x_base = _base_from(args.base_result, problem)
-    res = close_loop(problem, x_base, effects=effects, rounds=args.rounds, base_evals=args.base_evals,
-                     max_evals=args.max_evals, seed=args.seed, out=out, progress=not args.no_progress,
-                     workers=args.workers,
-                     sensor_offset_std=(meas.meta.get("sensor") or {}).get("force_offset_std_N"),
-                     fit_evals=args.fit_evals, refine_evals=args.refine_evals)
-    write_json_atomic(out / "result.json", res.to_dict())
-    report = write_report(res, out)
-    for r in res.rounds:
-        print(f"round {r.number}: {r.verdict}")
-    print(f"wrote {report} and {out / 'result.json'}")
-    return 0
-
-
-def _base_from(path: str, problem: IdentificationProblem) -> np.ndarray:
+def base_from_result(path, problem: IdentificationProblem) -> np.ndarray:
+    """The base point of a problem from an earlier identification's result.json (or its folder)."""
     p = Path(path)
     if p.is_dir():
         p = p / "result.json"
     try:
         d = json.loads(p.read_text())
     except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"--base-result {p}: cannot read it ({exc})") from None
+        raise ValueError(f"base result {p}: cannot read it ({exc})") from None
     if d.get("model") != problem.model:
-        raise ValueError(f"--base-result {p}: identified with model {d.get('model')}, not {problem.model}")
+        raise ValueError(f"base result {p}: identified with model {d.get('model')}, not {problem.model}")
     xs = d.get("x", {})
     missing = [n for n in problem.free if n not in xs]
     if missing:
-        raise ValueError(f"--base-result {p}: no value for {', '.join(missing)}")
+        raise ValueError(f"base result {p}: no value for {', '.join(missing)}")
     x = np.array([float(xs[n]) for n in problem.free])
     for n, v in zip(problem.free, x):
         lo, hi = problem.bounds[n]
         if not lo <= v <= hi:
-            raise ValueError(f"--base-result {p}: {n} = {v} lies outside the bounds [{lo}, {hi}]")
+            raise ValueError(f"base result {p}: {n} = {v} lies outside the bounds [{lo}, {hi}]")
     return x
 
 
-__all__ = ["close_loop", "one_round", "CloseLoopResult", "Round", "localise", "main"]
+__all__ = ["close_loop", "one_round", "CloseLoopResult", "Round", "localise", "base_from_result"]

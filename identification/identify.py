@@ -25,8 +25,11 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from .complex_rf import minimize_complex
-from .optim_result import ComplexResult, _jsonable
-from .problem import SHORT, IdentificationProblem, nrmsd
+from lss_fmu.design import symbol
+from lss_fmu.variables import FORCE_CHANNELS
+
+from .optim_result import ComplexResult, jsonable
+from .problem import IdentificationProblem
 
 
 def _key(x) -> str:
@@ -149,22 +152,17 @@ class IdentificationResult:
             "measurement": p.name, "model": p.model, "layout": p.layout,
             "free": list(p.free), "bounds": {k: list(p.bounds[k]) for k in p.free},
             "x0": dict(zip(p.free, map(float, self.x0))), "f0": self.f0,
-            "nrmsd0": dict(zip(_channels(), map(float, self.H0))),
+            "nrmsd0": dict(zip(FORCE_CHANNELS, map(float, self.H0))),
             "x": dict(zip(p.free, map(float, self.x))), "f": self.f,
-            "nrmsd": dict(zip(_channels(), map(float, self.H))),
-            "values": {SHORT.get(k, k): v for k, v in p.values(self.x).items()},
+            "nrmsd": dict(zip(FORCE_CHANNELS, map(float, self.H))),
+            "values": {symbol(k): v for k, v in p.values(self.x).items()},
             "nfev": self.nfev, "simulated": self.evaluated, "replayed": self.replayed,
             "message": self.message, "history_f": list(map(float, self.history_f)),
-            "iterations": _jsonable(self.iterations or {}),
+            "iterations": jsonable(self.iterations or {}),
             "nfev_total": self.nfev_total, "discarded": self.nfev_total - self.nfev,
             "rounds": self.nrounds, "workers": self.workers, "restarts": self.restarts,
             "seconds": self.seconds, "window_s": float(p.times[-1]),
         }
-
-
-def _channels() -> list:
-    from lss_fmu.variables import FORCE_CHANNELS
-    return FORCE_CHANNELS
 
 
 RESTART_WIDTH = 0.15   # half-width of a restart's box, as a share of each variable's bound range
@@ -267,4 +265,4 @@ def _safe_H(problem: IdentificationProblem, x) -> np.ndarray:
     try:
         return problem.channel_errors(x)
     except Exception:
-        return np.full(len(_channels()), np.nan)
+        return np.full(len(FORCE_CHANNELS), np.nan)

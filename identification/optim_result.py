@@ -42,14 +42,14 @@ EVAL_COLUMNS = ("eval_index", "x", "f", "accepted", "bad", "kind", "iteration", 
 ITER_COLUMNS = ("iteration", "round", "nfev", "best_f", "worst_f", "f_spread", "x_spread")
 
 
-def _jsonable(value: Any) -> Any:
+def jsonable(value: Any) -> Any:
     """Convert numpy containers / scalars to JSON types; non-finite floats -> None."""
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     if isinstance(value, (int, np.integer)):
@@ -134,17 +134,17 @@ class ComplexHistory:
     def to_dict(self) -> dict[str, Any]:
         return {
             "evaluations": {
-                "eval_index": _jsonable(self.eval_index),
-                "x": _jsonable(self.x),
-                "f": _jsonable(self.f),
-                "accepted": _jsonable(self.accepted),
-                "bad": _jsonable(self.bad),
+                "eval_index": jsonable(self.eval_index),
+                "x": jsonable(self.x),
+                "f": jsonable(self.f),
+                "accepted": jsonable(self.accepted),
+                "bad": jsonable(self.bad),
                 "kind": list(self.kind),
-                "iteration": _jsonable(self.iteration),
-                "round": _jsonable(self.round),
-                "path_index": _jsonable(self.path_index),
+                "iteration": jsonable(self.iteration),
+                "round": jsonable(self.round),
+                "path_index": jsonable(self.path_index),
             },
-            "iterations": {k: _jsonable(v) for k, v in self.iterations.items()},
+            "iterations": {k: jsonable(v) for k, v in self.iterations.items()},
             "errors": [[int(i), str(msg)] for i, msg in self.errors],
         }
 
@@ -219,8 +219,8 @@ class ComplexResult:
     def to_dict(self, include_history: bool = True) -> dict[str, Any]:
         """JSON-ready dictionary (``json.dumps(result.to_dict())`` works)."""
         d: dict[str, Any] = {
-            "x": _jsonable(self.x),
-            "fun": _jsonable(self.fun),
+            "x": jsonable(self.x),
+            "fun": jsonable(self.fun),
             "nfev": int(self.nfev),
             "nfev_used": int(self.nfev_used),
             "nit": int(self.nit),
@@ -229,9 +229,9 @@ class ComplexResult:
             "status": int(self.status),
             "message": str(self.message),
             "n_bad": int(self.n_bad),
-            "complex_x": _jsonable(self.complex_x),
-            "complex_f": _jsonable(self.complex_f),
-            "options": _jsonable(self.options),
+            "complex_x": jsonable(self.complex_x),
+            "complex_f": jsonable(self.complex_f),
+            "options": jsonable(self.options),
         }
         if include_history:
             d["history"] = self.history.to_dict()

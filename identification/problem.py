@@ -2,54 +2,27 @@
 
 Design vector x = [e_JA, e_JR, e_SW, e_RW, v_s, d, mu_d, s_M, K_P, K_I];
 objective f(x) = sum_j H_j^2 over the 7 forces, H_j = RMSD_j / (max - min of
-the measured force j). Each evaluation simulates the chain through the FMU
-(one ChainSimulator per process, reused with fmi2Reset), aligned on the
-trigger point s_M as the transducer cart logs. A failed or diverging
+the measured force j); the design vector itself is lss_fmu.design's. Each
+evaluation simulates the chain through the FMU (the problem's simulator: one
+instance per process, reused with fmi2Reset), aligned on the trigger point
+s_M as the transducer cart logs. A failed or diverging
 simulation gives a bad value and a logged line, never an exception.
 """
 from __future__ import annotations
 
 import logging
-import os
 from dataclasses import dataclass, field
 from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
+from lss_fmu.design import COR_BOUNDS, CORS, DESIGN, BY_SYMBOL, is_effect_parameter, symbol
+from lss_fmu.runner import LazySimulator
 from lss_fmu.variables import CONTACT_MODELS, FORCE_CHANNELS
 
 log = logging.getLogger(__name__)
 
-# design variable -> what it sets ("trigger.s_M" is the alignment, not an FMU value)
-DESIGN = ["contact.e_JA", "contact.e_JR", "contact.e_SW", "contact.e_RW", "drive.v_ref",
-          "chain.pretension", "wheel.mu_roll", "trigger.s_M", "drive.Kp", "drive.Ki"]
-SHORT = {"contact.e_JA": "e_JA", "contact.e_JR": "e_JR", "contact.e_SW": "e_SW", "contact.e_RW": "e_RW",
-         "drive.v_ref": "v_s", "chain.pretension": "d", "wheel.mu_roll": "mu_d", "trigger.s_M": "s_M",
-         "drive.Kp": "K_P", "drive.Ki": "K_I"}
-COR_BOUNDS = (0.2, 0.9)
 BAD_VALUE = 100.0  # worse than any simulation that ran (7 channels at NRMSD ~3.8)
-
-_SIMULATORS: dict = {}
-
-
-def is_effect_parameter(name: str) -> bool:
-    """A model extension of the close-loop (issue 7) added to the design vector."""
-    from lss_fmu.variables import BY_NAME
-    return name.startswith("effects.") and name in BY_NAME and BY_NAME[name].causality == "parameter"
-
-
-def short(name: str) -> str:
-    """The paper's symbol of a design variable; effect parameters keep their FMU name."""
-    return SHORT.get(name, name)
-
-
-def simulator():
-    """The process's own FMU instance (created on first use, reused after)."""
-    from lss_fmu.runner import ChainSimulator
-    pid = os.getpid()
-    if pid not in _SIMULATORS:
-        _SIMULATORS[pid] = ChainSimulator(instance_name=f"ident{pid}")
-    return _SIMULATORS[pid]
 
 
 def tared(residual: np.ndarray, tare: Optional[np.ndarray]) -> np.ndarray:
@@ -84,6 +57,8 @@ class IdentificationProblem:
     name: str = "measurement"
     tare: Optional[np.ndarray] = None    # per force channel, N: zero tolerance taken out (None: Eq. 10-12 as is)
     anti_alias: Optional[tuple] = None   # (order, cutoff Hz, causal): the logger's Butterworth filter, if declared
+    sample_rate: Optional[float] = None  # Hz; None: read off the times (triggered.sample_rate_of)
+    sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
 
     def __post_init__(self):
         if self.model not in CONTACT_MODELS:
@@ -138,35 +113,60 @@ class IdentificationProblem:
         return params, float(vals["trigger.s_M"])
 
     # -- evaluation --------------------------------------------------------------
-    def simulate(self, x: Sequence[float]) -> np.ndarray:
-        """The 7 simulated forces at the measured sample times (raises on failure)."""
+    def run(self, x: Sequence[float], extra: Optional[Mapping[str, object]] = None,
+            channels: Sequence[str] = FORCE_CHANNELS, times: Optional[np.ndarray] = None,
+            history: float = 0.0) -> np.ndarray:
+        """FMU outputs `channels` at `times` (default: the measured sample times)
+        after the trigger, at x with further FMU values `extra`, as simulated
+        (no sensor model). Raises on failure."""
         from lss_fmu.triggered import simulate_triggered
         params, s_m = self.fmu_params(x)
-        if self.anti_alias is None:
-            return simulate_triggered(simulator(), params, s_m, self.times, settle=self.settle,
-                                      tolerance=self.tolerance)
-        return self._through_filter(params, s_m)
+        params.update(extra or {})
+        return simulate_triggered(self.sim(), params, s_m, self.times if times is None else times,
+                                  settle=self.settle, channels=channels, tolerance=self.tolerance,
+                                  sample_rate=self.rate, history=history)
 
-    def _through_filter(self, params: dict, s_m: float) -> np.ndarray:
+    @property
+    def rate(self) -> float:
+        """The sample rate, Hz: declared, or read off the times."""
+        from lss_fmu.triggered import sample_rate_of
+        return float(self.sample_rate) if self.sample_rate else sample_rate_of(self.times)
+
+    def simulate(self, x: Sequence[float], extra: Optional[Mapping[str, object]] = None) -> np.ndarray:
+        """The 7 forces as the logger records them at the measured sample times
+        (through its anti-alias filter when the record declares one); raises on failure."""
+        if self.anti_alias is None:
+            return self.run(x, extra)
+        return self._through_filter(x, extra)
+
+    def _through_filter(self, x, extra) -> np.ndarray:
         """The simulation through the logger's declared anti-alias filter: on the
         communication grid (half the sample spacing) from FILTER_LEAD s before
         the trigger, so that the filter's 4 ms of group delay is in the model and
         not in the residual."""
         from scipy import signal
-        from scipy.interpolate import CubicSpline
-        from lss_fmu.triggered import simulate_triggered
+        from lss_fmu.sensor import interp_cubic
         order, cutoff, causal = self.anti_alias
-        dt = float(np.median(np.diff(self.times))) if len(self.times) > 1 else 1.0 / 300.0
-        h = dt / 2.0
-        grid = np.arange(-FILTER_LEAD, self.times[-1] + h, h)
-        y = simulate_triggered(simulator(), params, s_m, grid, settle=self.settle, tolerance=self.tolerance,
-                               step=h, history=FILTER_LEAD + 2 * h)
+        h = 0.5 / self.rate
+        grid = np.arange(-int(np.ceil(FILTER_LEAD / h)), int(np.ceil(self.times[-1] / h)) + 3) * h
+        y = self.run(x, extra, times=grid, history=FILTER_LEAD + 2 * h)
         sos = signal.butter(int(order), float(cutoff), btype="low", output="sos", fs=1.0 / h)
         if causal:
             y, _ = signal.sosfilt(sos, y, axis=0, zi=signal.sosfilt_zi(sos)[:, :, None] * y[0])
         else:
             y = signal.sosfiltfilt(sos, y, axis=0)
-        return CubicSpline(grid, y, axis=0)(self.times)
+        return interp_cubic(grid[0], h, y, self.times)
+
+    def model_constants(self, names: Sequence[str] = ("cart.r_drive", "track.length", "chain.n_carts")) -> dict:
+        """Calculated parameters of the model this problem simulates (its layout
+        and fixed values, at the start point), read from the FMU after
+        initialisation."""
+        x = self.x0_vector()
+        x = np.array([0.5 * (lo + hi) for lo, hi in self.bounds_array]) if x is None else x
+        params, _ = self.fmu_params(x)
+        sim = self.sim()
+        sim.start(params, tolerance=self.tolerance)
+        return {n: sim.get(n) for n in names}
 
     def channel_errors(self, x: Sequence[float]) -> np.ndarray:
         return nrmsd(self.samples, self.simulate(x), self.tare)
@@ -181,29 +181,8 @@ class IdentificationProblem:
             return f
         except Exception as exc:  # a failed simulation is a bad point, not the end of the run
             log.warning("%s/%s: simulation failed at %s: %s", self.name, self.model,
-                        {short(k): round(v, 5) for k, v in self.values(x).items()}, exc)
+                        {symbol(k): round(v, 5) for k, v in self.values(x).items()}, exc)
             return BAD_VALUE
-
-
-def default_bounds(nominal: Mapping[str, float], length: float) -> dict:
-    """Bounds around nominal layout values when the metadata gives none:
-    CoRs 0.2..0.9 (the paper), speed +-10 %, pretension 0.5..1.5 x,
-    rolling resistance 0.3..2 x, trigger +-0.5 m, gains 0.5..2 x."""
-    b = {k: COR_BOUNDS for k in DESIGN[:4]}
-    v, d, mu = nominal["drive.v_ref"], nominal["chain.pretension"], nominal["wheel.mu_roll"]
-    b["drive.v_ref"] = (0.9 * v, 1.1 * v)
-    b["chain.pretension"] = (0.5 * d, 1.5 * d)
-    b["wheel.mu_roll"] = (0.3 * mu, 2.0 * mu)
-    s = nominal["trigger.s_M"]
-    b["trigger.s_M"] = (s - 0.5, s + 0.5) if length > 2 else (0.0, length)
-    b["drive.Kp"] = (0.5 * nominal["drive.Kp"], 2.0 * nominal["drive.Kp"])
-    b["drive.Ki"] = (0.5 * nominal["drive.Ki"], 2.0 * nominal["drive.Ki"])
-    return b
-
-
-# measurement design-variable names (meta.json) -> design names here
-FROM_META = {"v_s": "drive.v_ref", "d": "chain.pretension", "mu_d": "wheel.mu_roll", "s_M": "trigger.s_M",
-             "K_P": "drive.Kp", "K_I": "drive.Ki"}
 
 
 def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, window: Optional[float] = None,
@@ -223,10 +202,10 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
             raise ValueError(f"window = {window}: must be positive")
         keep = t <= window + 1e-9
         t, forces = t[keep], forces[keep]
-    bounds = {k: COR_BOUNDS for k in DESIGN[:4]}
-    x0 = {k: 0.5 * sum(COR_BOUNDS) for k in DESIGN[:4]}
-    for short, dv in meas.design.items():
-        name = FROM_META[short]
+    bounds = {k: COR_BOUNDS for k in CORS}
+    x0 = {k: 0.5 * sum(COR_BOUNDS) for k in CORS}
+    for sym, dv in meas.design.items():
+        name = BY_SYMBOL[sym]
         bounds[name] = (float(dv.lower), float(dv.upper))
         x0[name] = float(dv.nominal)
     extra = dict(meas.meta.get("fmu_parameters", {}) or {})
@@ -242,7 +221,7 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
         aa = None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
-                                 name=meas.id, tare=tol, anti_alias=aa)
+                                 name=meas.id, tare=tol, anti_alias=aa, sample_rate=meas.sample_rate)
 
 
 FILTER_LEAD = 0.05   # s of simulated history before the trigger for the anti-alias filter (~12 time constants)

@@ -10,13 +10,12 @@ under perturbations far below any useful resolution.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Optional, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from .complex_rf import minimize_complex
-from .problem import SHORT, IdentificationProblem
+from .problem import IdentificationProblem
 
 
 @dataclass
@@ -81,28 +80,3 @@ def noise_floor(problem: IdentificationProblem, reference: Sequence[float], n: i
         x = np.clip(ref + scale * span * rng.uniform(-1, 1, len(ref)), lo, hi)
         out.append(problem(x))
     return np.asarray(out)
-
-
-def plot_profiles(profiles: list[Profile], floor: Optional[np.ndarray], path: Path, title: str,
-                  truth: Optional[dict] = None) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    n = len(profiles)
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.4), sharey=True, squeeze=False)
-    for ax, p in zip(axes[0], profiles):
-        ax.plot(p.grid, p.f, "o-", ms=3, label="re-optimised" if p.reoptimised else "others fixed")
-        if floor is not None and len(floor):
-            ax.axhspan(0, float(np.max(floor)), color="0.85", label="noise floor")
-        if truth and p.name in truth:
-            ax.axvline(truth[p.name], color="k", ls=":", lw=1, label="truth")
-        ax.set_xlabel(SHORT.get(p.name, p.name))
-        ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("objective f")
-    axes[0][0].legend(fontsize=7)
-    fig.suptitle(title)
-    fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(Path(path).with_suffix("." + ext), dpi=100)
-    plt.close(fig)
-    return Path(path).with_suffix(".png")

@@ -48,7 +48,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
     with the best point so far."""
-    from .attribution import _demean, base_jacobian, weights
+    from .attribution import base_jacobian, demean_columns, weights
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem))
@@ -64,7 +64,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
         nfev += len(x)
         if len(raw) != len(x):
             break
-        A = np.stack([(_demean(g, demean) * sw).ravel() for g in raw], axis=1)
+        A = np.stack([(demean_columns(g, demean) * sw).ravel() for g in raw], axis=1)
         b = r.ravel()
         scale = np.sqrt(np.sum(A ** 2, axis=0))
         # a variable the objective does not see (all its effect within the tare) takes no step

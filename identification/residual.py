@@ -9,8 +9,7 @@ along which model signal. Pure numpy/scipy; no FMU calls.
     a = analyse_residual(measured, simulated, times, s, track_length, layout="layout7")
     print(describe(a))                    # Markdown
     json.dump(to_json(a), f)              # JSON-safe summary
-    from identification.residual_figures import residual_figures
-    residual_figures(a, out_dir, measured, simulated)
+    # the figures: lss_app.figures.residual.residual_figures(a, out_dir, measured, simulated)
 
 What is computed (docs/effects.md, section "Residual analysis"):
 
@@ -50,16 +49,12 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 from scipy.signal import detrend
 
+from lss_fmu.design import LABELS  # noqa: F401 (the channel names of the figures and tables)
 from lss_fmu.variables import FORCE_CHANNELS
 
 from .problem import nrmsd as _nrmsd
 
-LABELS = ["joint F_x", "joint F_y", "joint F_z", "steering left", "steering right",
-          "driving left", "driving right"]
-
-# wheel type -> (driving-wheel radius, steering-wheel radius), m: fmu_src/cart_types.c
-WHEEL_RADIUS = {"A": (0.050, 0.040), "B": (0.050, 0.040), "C": (0.045, 0.035)}
-DEFAULT_R_DRIVE = 0.050     # m, wheel types A and B, when neither r_drive nor a layout is given
+DEFAULT_R_DRIVE = 0.050     # m, wheel types A and B, when r_drive is not given (the FMU's cart.r_drive)
 DEFAULT_PITCH = 1.25        # m (lss_fmu.track_geometry.PITCH)
 DEFAULT_MOTOR_LENGTH = 0.6  # m (drive.motor_length)
 # transducer.s is the arc position of the cart's wheel axle; the motor reaction
@@ -104,7 +99,7 @@ class ResidualAnalysis:
 
 
 # ----------------------------------------------------------------------------- inputs
-def _matrix(name: str, a, n: Optional[int]) -> np.ndarray:
+def as_matrix(name: str, a, n: Optional[int]) -> np.ndarray:
     cols = getattr(a, "columns", None)
     if cols is not None and all(c in list(cols) for c in FORCE_CHANNELS):
         a = a[FORCE_CHANNELS]
@@ -615,19 +610,20 @@ def analyse_residual(measured, simulated, times, s, track_length, *, layout=None
     s: (n,) transducer arc length from the simulation (`transducer.s`), m,
     wrapped at the track length or continuous; track_length: m.
     layout: a built-in name, a layout file, a LayoutSpec or a Track: gives
-    curvature, incline and motor presence per sample, the wheel radius, the
-    pitch and the motors. r_drive (m), pitch (m), motor_positions (centres
+    curvature, incline and motor presence per sample, the pitch and the
+    motors. r_drive: the driving wheels' rolling radius (m; the FMU's
+    cart.r_drive). pitch (m), motor_positions (centres
     (k,) or intervals (k, 2), m) override it. model_signals: more per-sample
     signals (e.g. 'v_joint'); they replace computed ones of the same name.
     nbins: bins of the fold; window: width of the concentration window, m;
     extra_lines: more named orders {name: cycles per metre}.
     Raises ValueError on bad input, naming the argument."""
     notes: list = []
-    M = _matrix("measured", measured, None)
+    M = as_matrix("measured", measured, None)
     n = M.shape[0]
     if n < MIN_SAMPLES:
         raise ValueError(f"measured has {n} samples: at least {MIN_SAMPLES} are needed")
-    S = _matrix("simulated", simulated, n)
+    S = as_matrix("simulated", simulated, n)
     t = _vector("times", times, n)
     dt = np.diff(t)
     if np.any(dt <= 0):
@@ -649,11 +645,9 @@ def analyse_residual(measured, simulated, times, s, track_length, *, layout=None
             notes.append(f"pitch not given: {DEFAULT_PITCH} m assumed")
     pitch = _positive("pitch", pitch)
     if r_drive is None:
-        if track is not None and track.spec.wheel in WHEEL_RADIUS:
-            r_drive = WHEEL_RADIUS[track.spec.wheel][0]
-        else:
-            r_drive = DEFAULT_R_DRIVE
-            notes.append(f"r_drive not given: {DEFAULT_R_DRIVE} m assumed (wheel types A and B)")
+        r_drive = DEFAULT_R_DRIVE
+        notes.append(f"r_drive not given: {DEFAULT_R_DRIVE} m assumed (wheel types A and B; the FMU's "
+                     f"cart.r_drive gives it)")
     r_drive = _positive("r_drive", r_drive)
     if nbins is not None:
         if isinstance(nbins, bool) or int(nbins) != nbins or nbins < 1:
@@ -793,10 +787,3 @@ def to_json(a: ResidualAnalysis) -> dict:
         nrmsd=a.nrmsd, objective=float(np.sum(a.nrmsd ** 2)), span=a.span, offset=a.offset,
         offset_share=a.offset_share, rms=a.rms, fold=fold, orders=spec, signals=sigs,
         concentration=a.concentration, notes=a.notes))
-
-
-def residual_figures(analysis: ResidualAnalysis, out_dir, measured=None, simulated=None, **kw) -> list:
-    """The figures (identification.residual_figures.residual_figures, where the
-    matplotlib code lives; imported on use so that this module stays numpy)."""
-    from .residual_figures import residual_figures as draw
-    return draw(analysis, out_dir, measured, simulated, **kw)

@@ -16,12 +16,14 @@ import math
 import numpy as np
 
 from .attribution import simulate_with
-from .problem import DESIGN, IdentificationProblem, tare_of
+from lss_fmu.design import CORS
+from lss_fmu.runner import LazySimulator
+
+from .problem import IdentificationProblem, tare_of
 from lss_fmu.sensor import NOISE_STD, OFFSET_STD
 from lss_fmu.variables import FORCE_CHANNELS
 
 LAYOUT = "layout7"
-CORS = tuple(DESIGN[:4])
 TRUTH = {"contact.e_JA": 0.46, "contact.e_JR": 0.558, "contact.e_SW": 0.351, "contact.e_RW": 0.645,
          "drive.v_ref": 2.0, "chain.pretension": 0.03, "wheel.mu_roll": 0.015, "trigger.s_M": 0.05,
          "drive.Kp": 500.0, "drive.Ki": 200.0}
@@ -31,18 +33,19 @@ SETTLE = 0.02       # s
 PITCH = 1.25        # m, cart i starts at about i * PITCH
 
 
-def transducer_before(s_target: float, lead: float = 0.5) -> tuple:
+def transducer_before(s_target: float, lead: float = 0.5, sim=None) -> tuple:
     """(cart index, trigger s_M) so that the transducer cart passes s_target
     early in the window: the cart about `lead` behind it, triggered 5 cm
-    after its assembled position (read from the FMU)."""
-    from .problem import simulator
+    after its assembled position (read from the FMU: `sim`, a ChainSimulator,
+    by default a new one)."""
     i = int(math.floor((s_target - lead) / PITCH)) % 52
-    sim = simulator()
+    sim = sim or LazySimulator()()
     sim.start({"layout.name": LAYOUT, "chain.transducer": i, **FIXED})
     return i, float(sim.get("transducer.s")) + 0.05
 
 
-def release_problem(window: float = 0.6, s_m: float = 0.3, noise_seed: int = 1) -> IdentificationProblem:
+def release_problem(window: float = 0.6, s_m: float = 0.3, noise_seed: int = 1,
+                    sim: LazySimulator | None = None) -> IdentificationProblem:
     """Layout 7, LW, the first `window` s after the trigger at `s_m`, right behind
     the start: the model at the truth (Table 3, row 1) plus the sensor model's
     noise, no offsets, no tare. The recovery tests and the optimiser benchmark
@@ -51,7 +54,7 @@ def release_problem(window: float = 0.6, s_m: float = 0.3, noise_seed: int = 1) 
     truth = {**TRUTH, "trigger.s_M": s_m}
     x0 = {**truth, **{k: 0.55 for k in CORS}}
     p = IdentificationProblem(np.zeros((len(times), 7)), times, LAYOUT, "LW", {k: (0.2, 0.9) for k in CORS},
-                              fixed=FIXED, free=CORS, x0=x0, settle=SETTLE)
+                              fixed=FIXED, free=CORS, x0=x0, settle=SETTLE, sim=sim or LazySimulator())
     clean = p.simulate([truth[k] for k in CORS])
     noise = np.random.default_rng(noise_seed).normal(size=clean.shape) * [NOISE_STD[c] for c in FORCE_CHANNELS]
     p.samples = clean + noise
@@ -59,14 +62,15 @@ def release_problem(window: float = 0.6, s_m: float = 0.3, noise_seed: int = 1) 
 
 
 def make_problem(effect_params: dict, seed: int, *, transducer: int = 0, s_m: float = 0.05,
-                 artefact: dict | None = None, offsets: bool = True) -> tuple:
+                 artefact: dict | None = None, offsets: bool = True, sim: LazySimulator | None = None) -> tuple:
     """(problem, truth_x): the measurement simulated with `effect_params`, the
     problem without them."""
     times = np.arange(0.0, WINDOW, 1.0 / 300.0)
     x0 = {**TRUTH, "trigger.s_M": s_m, **{k: 0.55 for k in CORS}}
     fixed = {**FIXED, "chain.transducer": transducer}
     p = IdentificationProblem(np.zeros((len(times), 7)), times, LAYOUT, "LW", {k: (0.2, 0.9) for k in CORS},
-                              fixed=fixed, free=CORS, x0=x0, settle=SETTLE, name=f"case{seed}", tare=tare_of())
+                              fixed=fixed, free=CORS, x0=x0, settle=SETTLE, name=f"case{seed}", tare=tare_of(),
+                              sim=sim or LazySimulator())
     truth = np.array([TRUTH[k] for k in CORS])
     clean = simulate_with(p, truth, effect_params)
     rng = np.random.default_rng([seed, 99])
@@ -88,8 +92,9 @@ def effect_case(effects, seed: int, artefact: dict | None = None) -> tuple:
     measurement only."""
     from lss_fmu import rig_effects
     params = rig_effects.draw_effects(list(effects), seed, LAYOUT) if effects else {}
+    sim = LazySimulator()
     kw = {}
     if "effects.track_bump.s" in params:  # the transducer cart passes the drawn joint in the window
-        kw["transducer"], kw["s_m"] = transducer_before(params["effects.track_bump.s"])
-    problem, _ = make_problem(params, seed, artefact=artefact, **kw)
+        kw["transducer"], kw["s_m"] = transducer_before(params["effects.track_bump.s"], sim=sim())
+    problem, _ = make_problem(params, seed, artefact=artefact, sim=sim, **kw)
     return problem, params

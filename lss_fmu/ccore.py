@@ -38,7 +38,8 @@ def load():
     sources = ([p for p in build.model_sources() if p.name not in build.FMI_GLUE] + build.testing_sources()
                + [build.GEN / "lss_vars.c"])
     headers = sorted(build.SRC.glob("*.h")) + sorted(build.TESTING.glob("*.h"))
-    if _stale(CORE_LIB, sources + headers):
+    # the build's own scripts count too: a change of what is compiled makes the library stale
+    if _stale(CORE_LIB, sources + headers + [Path(build.__file__), Path(__file__)]):
         build.BUILD.mkdir(exist_ok=True)
         tmp = CORE_LIB.with_suffix(".tmp" + CORE_LIB.suffix)
         build.compile_shared(tmp, sources, extra=["-fvisibility=default", "-I", str(build.TESTING)])

@@ -1,8 +1,8 @@
 """Designs of the built-in layouts, and the generator of their files.
 
-Run `python -m lss_fmu.layout_design` to (re)write
-`fmu_src/resources/layouts/*.layout`, or with `--check` to verify that the
-shipped files are what the designs give.
+`lss layouts design` (re)writes `fmu_src/resources/layouts/*.layout` from
+them (`generate`); with `--check` it verifies that the shipped files are what
+the designs give.
 
 Each design is a list of catalogue elements (straights in 0.5 m steps, curves
 of 2.5-4 m radius and 30/45/90/180 deg sweep, vertical curves of 10-15 m radius
@@ -16,8 +16,6 @@ rounding error (~1e-12 m), and the solved lengths are written in full.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -222,20 +220,3 @@ def generate(check: bool = False) -> list:
             if not check:
                 path.write_text(text)
     return stale
-
-
-def main(argv: Optional[list] = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m lss_fmu.layout_design", description=__doc__.split("\n")[0])
-    ap.add_argument("--check", action="store_true", help="only report files that differ from the designs")
-    args = ap.parse_args(argv)
-    stale = generate(check=args.check)
-    if args.check:
-        for n in stale:
-            print(f"{n}.layout differs from its design", file=sys.stderr)
-        return 1 if stale else 0
-    print(f"wrote {len(DESIGNS)} layouts to {LAYOUT_DIR} ({len(stale)} changed)")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -33,6 +33,14 @@ TABLE2 = {
 }
 LENGTH_TOLERANCE = 0.005  # relative, against the Table 2 length
 
+# Calibrated nominal pretension d (m) per layout: the mean axial joint force on
+# straights over one lap at 2 m/s is about 900 N (docs/measurements.md,
+# `lss_fmu.rig.calibrate_pretension`).
+NOMINAL_PRETENSION = {
+    "layout1": 0.035, "layout2": 0.045, "layout3": 0.072, "layout4": 0.031,
+    "layout5": 0.022, "layout6": 0.025, "layout7": 0.023, "demo": 0.015, "oval": 0.012,
+}
+
 
 def builtin_layouts() -> list:
     """Names of the built-in layouts: layout1..layout7 first, then the others."""

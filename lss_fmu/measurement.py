@@ -19,7 +19,7 @@ and the column; no sample is dropped, reordered in time or resampled.
     m.samples            # DataFrame: time + 11 channels, as in the file
     m.forces             # the 7 force channels (DataFrame)
     m.meta               # dict from meta.json
-    m.design             # {'v_s': DesignVariable(nominal, lower, upper, unit), ...}
+    m.design             # {'v_s': DesignBounds(nominal, lower, upper, unit), ...}
     m.layout_for_fmu     # what to give the FMU's layout.name
 """
 from __future__ import annotations
@@ -37,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from .layout_format import LayoutError
+from . import design
 from .variables import BY_NAME, FORCE_CHANNELS, SPEED_CHANNELS
 
 FORMAT_VERSION = 1
@@ -48,18 +49,6 @@ COLUMNS = [TIME] + CHANNELS
 UNITS = {TIME: "s", **{c: BY_NAME[c].unit for c in CHANNELS}}
 TIME_TOLERANCE = 0.05       # a time stamp may miss its grid point by this fraction of the interval
 RATE_TOLERANCE = 1e-3       # relative: the rate in meta.json against the time column
-
-# The layout-dependent design variables of the paper's Eq. (13), in order.
-DESIGN_VARIABLES = ("v_s", "d", "mu_d", "s_M", "K_P", "K_I")
-DESIGN_UNITS = {"v_s": "m/s", "d": "m", "mu_d": "1", "s_M": "m", "K_P": "N.s/m", "K_I": "N/m"}
-# FMU parameter (or input) each one sets; s_M is not an FMU value but the trigger
-# alignment (identification calls it "trigger.s_M")
-DESIGN_FMU = {"v_s": "drive.v_ref", "d": "chain.pretension", "mu_d": "wheel.mu_roll", "s_M": "trigger.s_M",
-              "K_P": "drive.Kp", "K_I": "drive.Ki"}
-# Defaults when meta.json does not give them: the FMU's defaults
-MU_ROLL_DEFAULT = float(BY_NAME["wheel.mu_roll"].start)
-KP_DEFAULT = float(BY_NAME["drive.Kp"].start)
-KI_DEFAULT = float(BY_NAME["drive.Ki"].start)
 
 # meta.json fields: name -> (type, unit or description); type 'number' is int or float
 REQUIRED_META = {
@@ -91,6 +80,10 @@ OPTIONAL_META = {
 WHEEL_TYPES, COUPLING_TYPES = ("A", "B", "C"), ("A", "B")
 
 
+def _unit(symbol: str) -> str:
+    return design.UNIT[design.BY_SYMBOL[symbol]]
+
+
 class MeasurementError(ValueError):
     """A measurement that cannot be used. `path` is the file, `line` the 1-based
     line in it (header = first non-comment line), `row` the 1-based data row,
@@ -113,34 +106,12 @@ class MeasurementError(ValueError):
 
 
 @dataclass(frozen=True)
-class DesignVariable:
+class DesignBounds:
+    """One layout-dependent design variable of a measurement."""
     nominal: float
     lower: float
     upper: float
     unit: str
-
-
-def derive_design_variables(meta: Mapping) -> dict:
-    """Nominal values and bounds of the layout-dependent design variables from
-    the nominal values in the metadata (the rules of docs/measurements.md):
-    v_s +-5 % of the nominal speed, d 0.5-1.5 x the nominal pretension, mu_d
-    1/3-2 x the data-sheet value, s_M +-0.5 m around the nominal trigger point,
-    K_P and K_I 1/4-4 x their nominal values."""
-    v = float(meta["speed_nominal"])
-    d = float(meta["pretension_nominal"])
-    mu = float(meta.get("mu_roll_nominal", MU_ROLL_DEFAULT))
-    s_M = float(meta["trigger_point"])
-    kp = float(meta.get("Kp_nominal", KP_DEFAULT))
-    ki = float(meta.get("Ki_nominal", KI_DEFAULT))
-    dv = {
-        "v_s": (v, 0.95 * v, 1.05 * v),
-        "d": (d, 0.5 * d, 1.5 * d),
-        "mu_d": (mu, mu / 3.0, 2.0 * mu),
-        "s_M": (s_M, s_M - 0.5, s_M + 0.5),
-        "K_P": (kp, kp / 4.0, 4.0 * kp),
-        "K_I": (ki, ki / 4.0, 4.0 * ki),
-    }
-    return {k: {"nominal": a, "lower": lo, "upper": hi, "unit": DESIGN_UNITS[k]} for k, (a, lo, hi) in dv.items()}
 
 
 # ----------------------------------------------------------------------------------------
@@ -202,25 +173,25 @@ class Measurement:
 
     @property
     def design(self) -> dict:
-        dv = self.meta.get("design_variables") or derive_design_variables(self.meta)
-        return {k: DesignVariable(float(dv[k]["nominal"]), float(dv[k]["lower"]), float(dv[k]["upper"]),
-                                  dv[k].get("unit", DESIGN_UNITS[k])) for k in DESIGN_VARIABLES}
+        dv = self.meta.get("design_variables") or design.bounds_from_meta(self.meta)
+        return {k: DesignBounds(float(dv[k]["nominal"]), float(dv[k]["lower"]), float(dv[k]["upper"]),
+                                dv[k].get("unit", _unit(k))) for k in design.META_KEYS}
 
     def bounds(self):
         """(names, nominal, lower, upper) of the layout-dependent design variables (Eq. 13 order)."""
         d = self.design
-        names = list(DESIGN_VARIABLES)
+        names = list(design.META_KEYS)
         return (names, np.array([d[k].nominal for k in names]), np.array([d[k].lower for k in names]),
                 np.array([d[k].upper for k in names]))
 
     def fmu_bounds(self) -> dict:
         """{FMU name: (lower, upper)} of the layout-dependent design variables
-        (names of DESIGN_FMU: drive.v_ref, chain.pretension, ..., trigger.s_M)."""
-        return {DESIGN_FMU[k]: (v.lower, v.upper) for k, v in self.design.items()}
+        (drive.v_ref, chain.pretension, ..., trigger.s_M; lss_fmu.design)."""
+        return {design.BY_SYMBOL[k]: (v.lower, v.upper) for k, v in self.design.items()}
 
     def fmu_nominal(self) -> dict:
         """{FMU name: nominal value} of the layout-dependent design variables."""
-        return {DESIGN_FMU[k]: v.nominal for k, v in self.design.items()}
+        return {design.BY_SYMBOL[k]: v.nominal for k, v in self.design.items()}
 
     def __repr__(self) -> str:
         return (f"Measurement({self.id!r}, layout={self.layout!r}, {self.n_samples} samples at "
@@ -329,15 +300,15 @@ def _parse_date(text: str):
 def _validate_design(dv, path) -> None:
     if not isinstance(dv, dict):
         raise MeasurementError(f"must be an object, got {_json_kind(dv)}", path, "design_variables")
-    missing = [k for k in DESIGN_VARIABLES if k not in dv]
+    missing = [k for k in design.META_KEYS if k not in dv]
     if missing:
-        raise MeasurementError(f"lacks {', '.join(missing)} (needs {', '.join(DESIGN_VARIABLES)})",
+        raise MeasurementError(f"lacks {', '.join(missing)} (needs {', '.join(design.META_KEYS)})",
                                path, "design_variables")
-    extra = [k for k in dv if k not in DESIGN_VARIABLES]
+    extra = [k for k in dv if k not in design.META_KEYS]
     if extra:
         raise MeasurementError(f"unknown design variable{'s' if len(extra) > 1 else ''} {', '.join(extra)} "
-                               f"(known: {', '.join(DESIGN_VARIABLES)})", path, "design_variables")
-    for k in DESIGN_VARIABLES:
+                               f"(known: {', '.join(design.META_KEYS)})", path, "design_variables")
+    for k in design.META_KEYS:
         entry = dv[k]
         name = f"design_variables.{k}"
         if not isinstance(entry, dict):
@@ -348,12 +319,12 @@ def _validate_design(dv, path) -> None:
                 raise MeasurementError("missing", path, f"{name}.{f}")
             v = entry[f]
             if not _type_ok(v, "number"):
-                raise MeasurementError(f"must be a number ({DESIGN_UNITS[k]}), got {_json_kind(v)}",
+                raise MeasurementError(f"must be a number ({_unit(k)}), got {_json_kind(v)}",
                                        path, f"{name}.{f}")
             if not math.isfinite(v):
                 raise MeasurementError(f"must be finite, got {v!r}", path, f"{name}.{f}")
-        if "unit" in entry and entry["unit"] != DESIGN_UNITS[k]:
-            raise MeasurementError(f"unit must be {DESIGN_UNITS[k]!r}, got {entry['unit']!r}",
+        if "unit" in entry and entry["unit"] != _unit(k):
+            raise MeasurementError(f"unit must be {_unit(k)!r}, got {entry['unit']!r}",
                                    path, f"{name}.unit")
         if not entry["lower"] <= entry["nominal"] <= entry["upper"] or not entry["lower"] < entry["upper"]:
             raise MeasurementError(f"needs lower < upper and lower <= nominal <= upper, got lower "
@@ -584,6 +555,8 @@ def find_measurements(root: Union[str, Path]) -> list:
     """The measurement folders under root (any depth; folders holding meta.json),
     never looking into a folder named 'answers'; sorted by number, then path."""
     root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"no such measurement folder: {root}")
     if (root / META_FILE).is_file():
         return [root]
     found = []
@@ -629,83 +602,3 @@ def write_measurement(folder: Union[str, Path], samples: pd.DataFrame, meta: Map
     tmp.replace(folder / SAMPLES_FILE)
     (folder / META_FILE).write_text(json.dumps(meta, indent=2, allow_nan=False) + "\n")
     return folder
-
-
-# ----------------------------------------------------------------------------------------
-# a figure of one measurement
-
-def plot_measurement(m: Measurement, path: Optional[Union[str, Path]] = None, title: Optional[str] = None,
-                     formats=("png", "svg"), shade_curves: bool = True):
-    """The 7 force channels of a measurement over the logged lap (time below,
-    track position s on the top axis: s_M + v_nominal t, modulo the track
-    length), horizontal curves shaded grey and vertical curves orange, as the
-    track drawing gives them. Saves path.<format> for each format when path
-    is given; returns the figure."""
-    import matplotlib
-    if path is not None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FuncFormatter
-
-    from .layout_format import CURVE, SPIRAL, VCURVE
-    t = m.time
-    v = float(m.meta["speed_nominal"])
-    s_M = float(m.meta["trigger_point"])
-    spans = []
-    L = None
-    if shade_curves:
-        try:
-            tr = m.track
-            L = tr.length
-            bounds = tr.boundaries()
-            colours = {CURVE: "0.88", SPIRAL: "#cfe0f5", VCURVE: "#fbe3c8"}
-            # element intervals in time, over the logged distance (unwrapped)
-            dist = v * t[-1]
-            for lap in range(int(np.floor(s_M / L)) - 1, int(np.ceil((s_M + dist) / L)) + 1):
-                for k, kind in enumerate(tr.kind):
-                    if kind in colours:
-                        a = (bounds[k] + lap * L - s_M) / v
-                        b = (bounds[k + 1] + lap * L - s_M) / v
-                        if b > 0 and a < t[-1]:
-                            spans.append((max(a, 0.0), min(b, t[-1]), colours[kind]))
-        except Exception:  # a figure without shading rather than none
-            spans = []
-    n = len(FORCE_CHANNELS)
-    fig, axes = plt.subplots(n, 1, figsize=(11, 1.45 * n + 1.2), sharex=True)
-    for ax, c in zip(axes, FORCE_CHANNELS):
-        for a, b, col in spans:
-            ax.axvspan(a, b, color=col, lw=0, zorder=0)
-        ax.plot(t, m.samples[c].to_numpy(), lw=0.6, color="C0", rasterized=True)  # small SVGs
-        ax.set_ylabel(c.replace("transducer.", "").replace(".", "\n", 1) + " [N]", fontsize=8)
-        ax.tick_params(labelsize=8)
-        ax.grid(alpha=0.3, lw=0.5)
-        ax.set_xlim(t[0], t[-1])
-    axes[-1].set_xlabel("time since trigger [s]")
-    top = axes[0].secondary_xaxis("top", functions=(lambda x: s_M + v * x, lambda s: (s - s_M) / v))
-    if L:
-        # ticks at round track positions, lap by lap (the position wraps at L)
-        u0, u1 = s_M, s_M + v * t[-1]
-        step = next(st for st in (1, 2, 5, 10, 20, 25, 50, 100, 200, 250, 500, 1000)
-                    if (u1 - u0) / st <= 12)
-        ticks = [lap * L + k * step for lap in range(int(np.floor(u0 / L)), int(np.floor(u1 / L)) + 1)
-                 for k in range(int(np.ceil(L / step)))
-                 if u0 <= lap * L + k * step <= u1 and (k * step < L - 0.4 * step or k == 0)]
-        top.set_xticks(ticks)
-        top.xaxis.set_major_formatter(FuncFormatter(lambda s, _: f"{s % L:.0f}"))
-    top.set_xlabel(f"track position s [m] (s_M = {s_M:g} m, at the nominal {v:g} m/s)", fontsize=9)
-    top.tick_params(labelsize=8)
-    fig.suptitle(title or f"{m.id}: {m.meta['layout']}, {v:g} m/s, d = {m.meta['pretension_nominal'] * 1e3:g} mm, "
-                 f"{m.n_samples} samples at {m.sample_rate:g} Hz", fontsize=10)
-    fig.tight_layout(rect=(0, 0, 1, 0.985))
-    if spans:
-        from matplotlib.patches import Patch
-        names = {"0.88": "horizontal curve", "#cfe0f5": "spiral", "#fbe3c8": "vertical curve"}
-        used = [c for c in names if any(col == c for _, _, col in spans)]
-        fig.legend(handles=[Patch(color=c, label=names[c]) for c in used], loc="upper right",
-                   fontsize=7, ncol=len(used), frameon=False)
-    if path is not None:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        for fmt in formats:
-            fig.savefig(path.with_suffix(f".{fmt}"), dpi=110)
-    return fig

@@ -49,10 +49,11 @@ from typing import Mapping, Optional, Sequence, Union
 
 import numpy as np
 
+from . import design
 from . import measurement as M
 from . import rig_effects as E
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
-from .layouts import TABLE2, load_track
+from .layouts import NOMINAL_PRETENSION, TABLE2, load_track
 from .sensor import CHANNELS, S_CHANNEL, SensorModel
 from .triggered import arriving_cart
 from .variables import BY_NAME, CONTACT_MODELS
@@ -79,7 +80,7 @@ TABLE3 = [
     (0.504, 0.236, 0.572, 0.534), (0.675, 0.473, 0.358, 0.825), (0.714, 0.590, 0.460, 0.311),
     (0.609, 0.737, 0.318, 0.479),
 ]
-COR_NAMES = ("e_JA", "e_JR", "e_SW", "e_RW")
+COR_NAMES = design.COR_SYMBOLS
 
 # The test plan: nominal speed (m/s) and pretension (factor on the layout's
 # calibrated pretension) of each measurement, as a test engineer would vary them.
@@ -91,14 +92,6 @@ TEST_PLAN = {
     13: (1.5, 0.8), 14: (1.5, 1.25), 15: (2.0, 1.0), 16: (2.5, 0.8), 17: (2.5, 1.25), 18: (3.0, 1.0),
     19: (2.0, 1.0),
     20: (1.5, 1.0), 21: (2.0, 1.25), 22: (3.0, 0.8),
-}
-
-# Calibrated nominal pretension d (m) per layout: the mean axial joint force on
-# straights over one lap at 2 m/s is about 900 N (docs/measurements.md,
-# `calibrate_pretension`).
-NOMINAL_PRETENSION = {
-    "layout1": 0.035, "layout2": 0.045, "layout3": 0.072, "layout4": 0.031,
-    "layout5": 0.022, "layout6": 0.025, "layout7": 0.023, "demo": 0.015, "oval": 0.012,
 }
 
 # Spread of the truth around the nominal values
@@ -379,7 +372,7 @@ def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) ->
                   + ("for one lap." if full_lap else f"for {n_samples} samples (shortened run, not a full lap).")),
         "sensor": sensor.describe(),
     }
-    meta["design_variables"] = M.derive_design_variables(meta)
+    meta["design_variables"] = design.bounds_from_meta(meta)
     return meta
 
 
@@ -394,8 +387,8 @@ def truth_for(case: Case, acq: dict, sensor: SensorModel, gen: dict, fmu_sha: st
                              "damping, none of the candidate laws HC, HW, LW, LN"),
         "cor": case.cor,
         "design_variables": case.truth,
-        "design_order": list(COR_NAMES) + list(M.DESIGN_VARIABLES),
-        "x": [case.cor[k] for k in COR_NAMES] + [case.truth[k] for k in M.DESIGN_VARIABLES],
+        "design_order": list(COR_NAMES) + list(design.META_KEYS),
+        "x": [case.cor[k] for k in COR_NAMES] + [case.truth[k] for k in design.META_KEYS],
         "field_deviations": case.field,
         "fmu_parameters": case.fmu_params,
         "layout_fmu": case.layout_fmu if case.layout_fmu == case.layout else case.field.get("as_built_file"),

@@ -257,7 +257,7 @@ def _draw_one(name: str, rng: np.random.Generator, track, transducer: Optional[i
 
 def nominal_pretension(track) -> float:
     """The nominal pretension d (m) of a built-in layout (or its as-built track) from lss_fmu.rig."""
-    from .rig import NOMINAL_PRETENSION
+    from .layouts import NOMINAL_PRETENSION
     name = str(track.spec.name).removesuffix("-as-built")
     if name not in NOMINAL_PRETENSION:
         raise ValueError(f"joint_clearance: no nominal pretension known for layout {name!r} "
@@ -271,7 +271,7 @@ def effects_truth(names, seed: int, layout, transducer: Optional[int] = None, st
     `layout`: a layout name, file or lss_fmu.track_geometry.Track (element joints, number of carts);
     `transducer`: the transducer cart's index (recorded with wheel_oor); `stream`: a second seed
     (the rig gives the layout's number); `pretension`: the layout's nominal pretension d, m (scales
-    the joint clearance; default from lss_fmu.rig.NOMINAL_PRETENSION)."""
+    the joint clearance; default from lss_fmu.layouts.NOMINAL_PRETENSION)."""
     names = parse_effects(names, "effects")
     track = _track(layout) if ("track_bump" in names or "joint_clearance" in names) else None
     if "joint_clearance" in names and pretension is None:

@@ -9,10 +9,11 @@ the FMU's own words.
 from __future__ import annotations
 
 import atexit
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Mapping, Optional, Sequence
+from typing import Callable, Iterable, Iterator, Mapping, Optional, Sequence
 
 import numpy as np
 import pandas as pd
@@ -23,7 +24,7 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2Warning)
 
 from . import build
-from .variables import BY_NAME, FORCE_CHANNELS, SPEED_CHANNELS
+from .variables import FORCE_CHANNELS, SPEED_CHANNELS
 
 DEFAULT_OUTPUTS = FORCE_CHANNELS + SPEED_CHANNELS + ["transducer.s", "chain.v_mean"]
 
@@ -148,60 +149,103 @@ class ChainSimulator:
             raise self._fail(f"step from t = {self.time:g} s failed", exc) from None
         self.time += h
 
-    def simulate(self, stop_time: float, step: float = 1.0 / 300.0,
-                 params: Optional[Mapping[str, object]] = None, outputs: Sequence[str] = DEFAULT_OUTPUTS,
-                 tolerance: Optional[float] = None, start_time: float = 0.0,
-                 on_step: Optional[Callable[["ChainSimulator", float], None]] = None,
-                 record_from: float = -np.inf) -> pd.DataFrame:
-        """Simulate from start_time to stop_time and return the outputs at every
-        communication point (a DataFrame with a 'time' column). `on_step(sim, t)`
-        is called before each step (to change inputs at a communication point)."""
-        if not (stop_time > start_time) or not np.isfinite(stop_time):
-            raise ValueError(f"stop_time = {stop_time} must be finite and after start_time = {start_time}")
-        if not (step > 0):
-            raise ValueError(f"step = {step} must be positive")
-        self.start(params, tolerance, start_time)
-        n = int(round((stop_time - start_time) / step))
+    def stream(self, step: float, outputs: Sequence[str] = DEFAULT_OUTPUTS,
+               params: Optional[Mapping[str, object]] = None, tolerance: Optional[float] = None,
+               start_time: float = 0.0, inputs: Optional[Mapping[str, Callable[[float], float]]] = None,
+               on_step: Optional[Callable[["ChainSimulator", float], None]] = None) -> Iterator[tuple]:
+        """The one stepping loop. Resets, sets `params` and initialises now;
+        the returned iterator then yields (t, values) at start_time and after
+        every communication step, t = start_time + k * step exactly (no drift),
+        for as long as the caller goes on. `values` is a numpy view of one
+        buffer, overwritten at the next step: copy what you keep.
+
+        `inputs` maps an input or tunable parameter to a function of time, set
+        at every communication point before the step (held over the step, as
+        FMI co-simulation does): a speed schedule for drive.v_ref, say.
+        `on_step(sim, t)` is called before each step as well."""
+        if not (step > 0) or not np.isfinite(step):
+            raise ValueError(f"step = {step} must be positive and finite")
         vrs = [self.vr(o) for o in outputs]
         types = {self.variables[o].type for o in outputs}
         if types - {"Real"}:
-            raise ValueError("simulate() records Real outputs only")
+            raise ValueError("the stream records Real outputs only")
+        schedule = []
+        for name, fn in (inputs or {}).items():
+            var = self.variables.get(name) or self.variables[self.vr(name)]
+            if var.type != "Real" or not (var.causality == "input" or var.variability == "tunable"):
+                raise ValueError(f"{name} cannot follow a schedule: only Real inputs and tunable "
+                                 f"parameters can change during a run")
+            schedule.append(((fmi2ValueReference * 1)(var.valueReference), fn, name))
+        self.start(params, tolerance, start_time)
         nv = len(vrs)
         c_vr = (fmi2ValueReference * nv)(*vrs)
         c_val = (fmi2Real * nv)()
+        c_in = (fmi2Real * 1)()
         # The loop calls the FMU's C functions directly (fmpy's wrappers add a
         # Python call and a status check per call); a status above fmi2Warning
         # raises as fmpy would. val is a numpy view of the output buffer.
         raw = getattr(self.fmu, "_functions", {})
         get_real = raw.get("fmi2GetReal") or self.fmu.fmi2GetReal
+        set_real = raw.get("fmi2SetReal") or self.fmu.fmi2SetReal
         do_step = raw.get("fmi2DoStep") or self.fmu.fmi2DoStep
         comp = self.fmu.component
         val = np.frombuffer(c_val, dtype=np.float64)
-        data = np.empty((n + 1, nv))
-        times = (start_time + step * np.arange(n + 1)).tolist()
+        return self._steps(step, start_time, schedule, on_step, get_real, set_real, do_step, comp, c_vr, nv,
+                           c_val, c_in, val)
+
+    def _steps(self, step, start_time, schedule, on_step, get_real, set_real, do_step, comp, c_vr, nv, c_val,
+               c_in, val):
+        t, k = start_time, 0
         try:
             if get_real(comp, c_vr, nv, c_val) > fmi2Warning:
                 raise FMICallException(function="fmi2GetReal", status=fmi2Error)
-            data[0] = val
-            t = start_time
-            for k in range(1, n + 1):
+            yield t, val
+            while True:
                 if on_step is not None:
                     on_step(self, t)
-                t_next = times[k]
+                for c_ref, fn, name in schedule:
+                    c_in[0] = float(fn(t))
+                    if set_real(comp, c_ref, 1, c_in) > fmi2Warning:
+                        raise FMICallException(function=f"fmi2SetReal ({name} = {c_in[0]!r} at t = {t:g} s)",
+                                               status=fmi2Error)
+                k += 1
+                t_next = start_time + step * k
                 status = do_step(comp, t, t_next - t, 1)
                 if status > fmi2Warning:
                     raise FMICallException(function="fmi2DoStep", status=status)
                 t = t_next
+                self.time = t
                 if get_real(comp, c_vr, nv, c_val) > fmi2Warning:
                     raise FMICallException(function="fmi2GetReal", status=fmi2Error)
-                data[k] = val
+                yield t, val
         except FMICallException as exc:
             self.time = t
             raise self._fail(f"simulation failed after t = {t:g} s", exc) from None
-        self.time = t
-        times = np.asarray(times)
+
+    def simulate(self, stop_time: float, step: float = 1.0 / 300.0,
+                 params: Optional[Mapping[str, object]] = None, outputs: Sequence[str] = DEFAULT_OUTPUTS,
+                 tolerance: Optional[float] = None, start_time: float = 0.0,
+                 on_step: Optional[Callable[["ChainSimulator", float], None]] = None,
+                 record_from: float = -np.inf,
+                 inputs: Optional[Mapping[str, Callable[[float], float]]] = None) -> pd.DataFrame:
+        """Simulate from start_time to stop_time and return the outputs at every
+        communication point (a DataFrame with a 'time' column); see `stream`
+        for `inputs` and `on_step`."""
+        if not (stop_time > start_time) or not np.isfinite(stop_time):
+            raise ValueError(f"stop_time = {stop_time} must be finite and after start_time = {start_time}")
+        if not (step > 0):
+            raise ValueError(f"step = {step} must be positive")
+        n = int(round((stop_time - start_time) / step))
+        outputs = list(outputs)
+        data = np.empty((n + 1, len(outputs)))
+        times = np.empty(n + 1)
+        for k, (t, val) in enumerate(self.stream(step, outputs, params, tolerance, start_time, inputs, on_step)):
+            data[k] = val
+            times[k] = t
+            if k == n:
+                break
         keep = times >= record_from - 1e-12
-        df = pd.DataFrame(data[keep], columns=list(outputs))
+        df = pd.DataFrame(data[keep], columns=outputs)
         df.insert(0, "time", times[keep])
         return df
 
@@ -223,6 +267,39 @@ class ChainSimulator:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class LazySimulator:
+    """The simulator of the process that uses it, made on first use: a problem
+    carries one and calls it for its FMU instance. It pickles to its FMU path
+    only, so a copy sent to a worker process makes that worker's own instance
+    (one per process, reused with fmi2Reset run after run)."""
+
+    def __init__(self, fmu: Optional[Path] = None):
+        self.fmu = None if fmu is None else str(fmu)
+        self._sim: Optional[ChainSimulator] = None
+        self._pid: Optional[int] = None
+
+    def __call__(self) -> ChainSimulator:
+        if self._sim is None or self._pid != os.getpid():
+            self._sim = ChainSimulator(None if self.fmu is None else Path(self.fmu),
+                                       instance_name=f"lss{os.getpid()}")
+            self._pid = os.getpid()
+        return self._sim
+
+    def close(self) -> None:
+        if self._sim is not None and self._pid == os.getpid():
+            self._sim.close()
+        self._sim = self._pid = None
+
+    def __getstate__(self):
+        return {"fmu": self.fmu}
+
+    def __setstate__(self, state):
+        self.__init__(state["fmu"])
+
+    def __repr__(self) -> str:
+        return f"LazySimulator({self.fmu or 'build/LSSChain.fmu'})"
 
 
 def simulate(layout: str = "demo", stop_time: float = 10.0, step: float = 1.0 / 300.0,

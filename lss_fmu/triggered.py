@@ -1,22 +1,28 @@
 """Simulations aligned on the trigger point, as the transducer cart logs them.
 
 The photocell starts logging when the transducer cart passes the trigger point
-s_M. `simulate_triggered` runs the chain past a settling time, finds the
-crossing of s_M (interpolated between communication points, across the wrap
-at the track length), and returns the outputs at the requested times after
-the crossing, interpolated with cubic splines from a communication grid twice
-as fine as the samples.
+s_M. `simulate_triggered` arms the trigger at a given time, finds the first
+forward crossing of s_M at or after it (interpolated within the step, across
+the wrap at the track length: the rule of the virtual transducer cart,
+lss_fmu.sensor.trigger_times), and returns the outputs at the requested
+times after the crossing, interpolated with 4-point cubics from a
+communication grid twice as fine as the samples.
+
+The grid is k * h exactly, h from the sample rate, so the first samples do
+not depend on how long the record is or on the rounding of its time column.
 """
 from __future__ import annotations
 
 from collections import deque
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from .runner import ChainSimulator, SimulationError
+from .sensor import interp_cubic
 from .variables import FORCE_CHANNELS
+
+S_CHANNEL = "transducer.s"
 
 
 def arriving_cart(length: float, n_carts: int, s_m: float, v: float, arrival: float,
@@ -37,76 +43,80 @@ def arriving_cart(length: float, n_carts: int, s_m: float, v: float, arrival: fl
 
 
 def crossing_fraction(s_prev: float, s_cur: float, s_m: float, length: float) -> float | None:
-    """Fraction in [0, 1) of the step s_prev -> s_cur at which the cart passes
+    """Fraction in [0, 1] of the step s_prev -> s_cur at which the cart passes
     s_m moving forward (arc lengths wrap at `length`), or None."""
     moved = (s_cur - s_prev) % length
     if moved <= 0 or moved > 0.5 * length:
         return None
     ahead = (s_m - s_prev) % length
-    if ahead < moved or (ahead == 0.0):
+    if ahead <= moved:
         return ahead / moved
     return None
+
+
+def sample_rate_of(times: np.ndarray) -> float:
+    """The sample rate of a regular time column (Hz), rounded to 1e-6 Hz so
+    that the last bits of the spacing do not change the simulation grid."""
+    times = np.asarray(times, float)
+    if len(times) < 2:
+        return 300.0
+    return round(1.0 / float(np.median(np.diff(times))), 6)
 
 
 def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: float,
                        sample_times: np.ndarray, settle: float = 3.0,
                        channels: Sequence[str] = FORCE_CHANNELS, max_wait: float | None = None,
                        tolerance: float | None = None, step: float | None = None,
-                       history: float = 0.0) -> np.ndarray:
+                       history: float = 0.0, sample_rate: Optional[float] = None,
+                       inputs: Optional[Mapping[str, Callable[[float], float]]] = None) -> np.ndarray:
     """Outputs `channels` at `sample_times` (s after the trigger crossing) as an
-    array (len(sample_times), len(channels)). The communication step is
-    `step`, by default half the sample spacing; `history` s before the crossing
-    are kept too, so that sample times down to -history can be asked for.
+    array (len(sample_times), len(channels)).
+
+    The trigger is armed at t = `settle` s after the start; the first forward
+    crossing of s_m at or after that instant is time 0. The communication step
+    is `step`, by default half the sample spacing 1 / `sample_rate` (by
+    default read off sample_times, see sample_rate_of); `history` s before the
+    crossing are kept too, so that sample times down to -history can be asked
+    for. `inputs`: FMU inputs following a schedule (ChainSimulator.stream).
     Raises SimulationError if the run fails or the cart never reaches s_m
-    within `max_wait` after settling."""
-    dt = float(np.median(np.diff(sample_times))) if len(sample_times) > 1 else 1.0 / 300.0
-    h = dt / 2.0 if step is None else float(step)
-    past = deque(maxlen=int(np.ceil(history / h)) + 1 if history > 0 else 0)
+    within `max_wait` s after arming."""
+    sample_times = np.asarray(sample_times, float)
+    rate = float(sample_rate) if sample_rate is not None else sample_rate_of(sample_times)
+    h = 0.5 / rate if step is None else float(step)
     duration = float(sample_times[-1]) + 2 * h
-    sim.start(params, tolerance=tolerance)
+    stream = sim.stream(h, [S_CHANNEL, *channels], params, tolerance, inputs=inputs)
     length = float(sim.get("track.length"))
     v = max(abs(float(params.get("drive.v_ref", 2.0))), 0.1)
     if max_wait is None:
         max_wait = 1.5 * length / v + 1.0
-    vr_s = sim.vr("transducer.s")
-    vrs = [sim.vr(c) for c in channels]
-    fmu = sim.fmu
-    t = 0.0
-    n_settle = int(np.ceil(settle / h))
-    for _ in range(n_settle):
-        sim.step(h)
-    t = sim.time
-    s_prev = fmu.getReal([vr_s])[0]
-    t_cross = None
-    rows, times = [], []
-    limit = t + max_wait
-    while t_cross is None:
-        if t > limit:
-            raise SimulationError(f"the transducer cart did not pass s_M = {s_m:.3f} m within "
-                                  f"{max_wait:.1f} s after settling")
-        prev_vals = fmu.getReal(vrs)
-        sim.step(h)
-        t = sim.time
-        s_cur = fmu.getReal([vr_s])[0]
-        frac = crossing_fraction(s_prev, s_cur, s_m, length)
-        if frac is None:
-            past.append((t - h, prev_vals))
-        else:
-            t_cross = t - h + frac * h
-            times.extend(tp for tp, _ in past)
-            rows.extend(v for _, v in past)
-            rows.append(prev_vals)
-            times.append(t - h)
-            rows.append(fmu.getReal(vrs))
-            times.append(t)
-        s_prev = s_cur
-    while t < t_cross + duration:
-        sim.step(h)
-        t = sim.time
-        rows.append(fmu.getReal(vrs))
-        times.append(t)
+    t_arm = float(settle)
+    keep = int(np.ceil(history / h)) + 2      # rows before the crossing: history and the cubic's support
+    past: deque = deque(maxlen=keep)
+    t_prev = s_prev = None
+    t0 = t_cross = None
+    rows: list = []
+    for t, val in stream:
+        s = float(val[0])
+        if t_cross is None:
+            if t_prev is not None and t > t_arm:
+                frac = crossing_fraction(s_prev, s, s_m, length)
+                if frac is not None:
+                    tc = t_prev + frac * (t - t_prev)
+                    if tc >= t_arm:
+                        t_cross = tc
+                        rows = [r for _, r in past]
+                        t0 = past[0][0] if past else t
+            if t_cross is None:
+                if t > t_arm + max_wait:
+                    raise SimulationError(f"the transducer cart did not pass s_M = {s_m:.3f} m within "
+                                          f"{max_wait:.1f} s after the trigger was armed at t = {t_arm:g} s")
+                past.append((t, val[1:].copy()))
+                t_prev, s_prev = t, s
+                continue
+        rows.append(val[1:].copy())
+        if t >= t_cross + duration:
+            break
     data = np.asarray(rows)
     if not np.all(np.isfinite(data)):
         raise SimulationError("the simulated outputs are not finite")
-    spline = CubicSpline(np.asarray(times) - t_cross, data, axis=0)
-    return spline(sample_times)
+    return interp_cubic(t0 - t_cross, h, data, sample_times)

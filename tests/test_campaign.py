@@ -15,19 +15,19 @@ import pandas as pd
 import pytest
 
 from identification.campaign import run_campaign
-from identification.report import write_report
+from lss_app.campaign_report import write_report
 
 SMALL = dict(max_evals=4, window=0.2, settle=0.05, free=("contact.e_SW", "contact.e_RW"), progress=False)
 
 
 def _write_measurement(folder: Path, mid: str, number: int, e_sw: float) -> None:
-    from identification.problem import simulator
+    from lss_fmu.runner import LazySimulator
     from lss_fmu.measurement import write_measurement
     from lss_fmu.triggered import simulate_triggered
     from lss_fmu.variables import FORCE_CHANNELS, SPEED_CHANNELS
     t = np.arange(0, 0.25, 1 / 300)
     params = {"layout.name": "layout7", "contact.model": 3, "contact.e_SW": e_sw, "chain.pretension": 0.03}
-    sig = simulate_triggered(simulator(), params, 0.3, t, settle=0.05, channels=FORCE_CHANNELS + SPEED_CHANNELS)
+    sig = simulate_triggered(LazySimulator()(), params, 0.3, t, settle=0.05, channels=FORCE_CHANNELS + SPEED_CHANNELS)
     df = pd.DataFrame(np.round(sig, 3), columns=FORCE_CHANNELS + SPEED_CHANNELS)
     df.insert(0, "time", t)
     meta = {"format_version": 1, "id": mid, "number": number, "layout": "layout7", "wheel_type": "C",
@@ -69,7 +69,7 @@ def test_campaign_results_and_report(reference):
 
 def test_killed_campaign_resumes_with_the_same_results(data, reference, tmp_path):
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "identification.campaign", str(data), "--models", "LW,HW", "--out", str(out),
+    cmd = [sys.executable, "-m", "lss_app.cli", "campaign", str(data), "--models", "LW,HW", "--out", str(out),
            "--workers", "1", "--max-evals", "4", "--window", "0.2", "--settle", "0.05", "--free", "e_SW,e_RW",
            "--no-progress"]
     proc = subprocess.Popen(cmd, start_new_session=True)

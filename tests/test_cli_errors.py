@@ -15,7 +15,7 @@ from test_measurement import make_meta, make_samples, rewrite_csv, set_cell
 
 
 def lss(*args: str, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "lss_fmu.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "lss_app.cli", *args], capture_output=True, text=True,
                           timeout=300, cwd=cwd)
 
 

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from lss_fmu.cli import main as lss
+from lss_app.cli import main as lss
 
 
 @pytest.fixture(scope="module")

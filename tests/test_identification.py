@@ -107,16 +107,16 @@ def test_failed_simulation_is_a_bad_value_not_a_crash(release_problem, caplog):
 
 def test_identify_command_end_to_end(fmu_file, tmp_path):
     """`lss identify` on a measurement folder: result JSON and the figures."""
-    from lss_fmu.cli import main
+    from lss_app.cli import main
     from lss_fmu.measurement import write_measurement
     p_times = np.arange(0, 0.5, 1 / 300)
     p = IdentificationProblem(np.zeros((len(p_times), 7)), p_times, "layout7", "LW",
                               {k: (0.2, 0.9) for k in CORS}, free=CORS, x0=TRUTH, settle=3.0)
-    from identification.problem import simulator
+    from lss_fmu.runner import LazySimulator
     from lss_fmu.triggered import simulate_triggered
     from lss_fmu.variables import SPEED_CHANNELS
     params, s_m = p.fmu_params([TRUTH[k] for k in CORS])
-    sig = simulate_triggered(simulator(), params, s_m, p_times, settle=3.0,
+    sig = simulate_triggered(LazySimulator()(), params, s_m, p_times, settle=3.0,
                              channels=FORCE_CHANNELS + SPEED_CHANNELS)
     df = pd.DataFrame(sig, columns=FORCE_CHANNELS + SPEED_CHANNELS)
     df.insert(0, "time", p_times)

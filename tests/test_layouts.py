@@ -11,7 +11,11 @@ from lss_fmu import layout_design
 from lss_fmu.layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, LayoutError, parse_layout
 from lss_fmu.layouts import (LAYOUT_DIR, TABLE2, builtin_layouts, load_track, resolve_layout, summary,
                              table2_mismatches)
-from lss_fmu.layouts_cli import layouts_main
+from lss_app.cli import main as lss
+
+
+def layouts_main(argv: list) -> int:
+    return lss(["layouts", *argv])
 from lss_fmu.track_geometry import PITCH, Track
 
 HEAD = "wheel A\ncoupling A\nmotors 2\n"

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from lss_fmu import design
 from lss_fmu import measurement as M
 from lss_fmu.variables import FORCE_CHANNELS, SPEED_CHANNELS
 
@@ -24,7 +25,7 @@ def make_meta(**over):
         "coupling_type": "A", "speed_nominal": 2.0, "pretension_nominal": 0.023, "sample_rate": FS,
         "trigger_point": 19.8, "date": "2011-05-02", "notes": "unit test",
     }
-    meta["design_variables"] = M.derive_design_variables(meta)
+    meta["design_variables"] = design.bounds_from_meta(meta)
     meta.update(over)
     return meta
 
@@ -92,7 +93,7 @@ def test_round_trip_exact(tmp_path):
     assert m.n_samples == 1000 and m.sample_rate == FS
     assert m.design["d"].nominal == 0.023 and m.design_source == "meta.json"
     names, nom, lo, hi = m.bounds()
-    assert names == list(M.DESIGN_VARIABLES) and np.all(lo <= nom) and np.all(nom <= hi)
+    assert names == list(design.META_KEYS) and np.all(lo <= nom) and np.all(nom <= hi)
     assert m.layout_for_fmu == "layout7"
 
 

@@ -48,10 +48,10 @@ def test_identification_picks_a_transducer_cart_that_arrives_soon(m22):
     meas, truth = m22
     p = from_measurement(meas, "LW", window=1.0, settle=4.0)
     x = np.array(truth["x"])
-    from identification.problem import simulator
+    from lss_fmu.runner import LazySimulator
     from lss_fmu.triggered import simulate_triggered
     params, s_m = p.fmu_params(x)
-    sim = simulator()
+    sim = LazySimulator()()
     sim.start(params)
     v = float(params["drive.v_ref"])
     s0 = float(sim.get("transducer.s"))

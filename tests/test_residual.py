@@ -4,19 +4,17 @@ from __future__ import annotations
 
 import json
 import math
-import re
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from identification.residual import (LINE_SNR_THRESHOLD, UNEVEN_RATIO, WHEEL_RADIUS, ResidualAnalysis,
-                                     analyse_residual, describe, to_json)
+from identification.residual import (LINE_SNR_THRESHOLD, UNEVEN_RATIO, ResidualAnalysis, analyse_residual,
+                                     describe, to_json)
 from lss_fmu.layouts import load_track
 from lss_fmu.variables import FORCE_CHANNELS
 
-ROOT = Path(__file__).resolve().parent.parent
 FS, V, S_START = 300.0, 2.0, 20.0
+R7 = 0.045   # m: layout 7's driving wheels (type C), the FMU's cart.r_drive (tests/test_effects_fmu.py)
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +34,7 @@ def record(duration, seed=0, s_start=S_START, sigma=2.0):
 
 def analyse(t, s, measured, residual, L, **kw):
     kw.setdefault("layout", "layout7")
+    kw.setdefault("r_drive", R7)
     return analyse_residual(measured, measured - residual, t, s, L, **kw)
 
 
@@ -70,12 +69,6 @@ def test_nrmsd_span_offset_and_named_lines(track7):
     assert a.orders["resolution"] == pytest.approx(1 / (V * 5.0), rel=0.01)
 
 
-def test_wheel_radii_agree_with_the_c_core():
-    text = (ROOT / "fmu_src" / "cart_types.c").read_text()
-    found = dict(re.findall(r"case '([ABC])':.*?t->r_drive = ([0-9.]+);", text, re.S))
-    assert found and {k: float(v) for k, v in found.items()} == {k: v[0] for k, v in WHEEL_RADIUS.items()}
-
-
 def test_motor_presence_follows_the_reaction_plate(track7):
     m0, m1 = track7.motors[0]
     centre = 0.5 * (m0 + m1)
@@ -93,7 +86,7 @@ def test_motor_presence_follows_the_reaction_plate(track7):
 @pytest.mark.parametrize("duration", [0.6, 0.75, 1.0, 20.0])
 def test_wheel_order_sinusoid_is_the_strongest_line(track7, duration):
     t, s, M, noise = record(duration, seed=3)
-    f_wheel = 1 / (2 * math.pi * WHEEL_RADIUS["C"][0])
+    f_wheel = 1 / (2 * math.pi * R7)
     R = noise.copy()
     R[:, 3] += 40.0 * np.sin(2 * np.pi * f_wheel * s + 0.7)
     # and a big component at the cart order, too slow to be resolved in a short record
@@ -283,7 +276,7 @@ def test_bad_input_is_named(change, message):
 
 # ----------------------------------------------------------------------------- figures
 def test_figures_are_written(track7, tmp_path):
-    from identification.residual import residual_figures   # the close-loop report imports it from here
+    from lss_app.figures.residual import residual_figures
     t, s, M, noise = record(6.0, seed=12)       # 20-32 m: a vertical curve, a motor, into a curve
     R = noise.copy()
     R[:, 1] += 300 * track7.curvature(s)[0]

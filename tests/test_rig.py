@@ -10,10 +10,15 @@ import math
 import numpy as np
 import pytest
 
+from lss_fmu import design
 from lss_fmu import measurement as M
 from lss_fmu import rig, sensor as S
 from lss_fmu.layouts import load_track
-from lss_fmu.rig_cli import rig_main
+from lss_app.cli import main as lss
+
+
+def rig_main(argv: list) -> int:
+    return lss(["rig", *argv])
 from lss_fmu.variables import FORCE_CHANNELS
 
 
@@ -44,7 +49,7 @@ def test_cases_reproducible_and_within_bounds():
         assert rig.make_case("recovery", n, seed=5).truth != a.truth   # another seed, other draws
         meta = {"speed_nominal": a.speed_nominal, "pretension_nominal": a.pretension_nominal,
                 "trigger_point": a.s_M_nominal}
-        dv = M.derive_design_variables(meta)
+        dv = design.bounds_from_meta(meta)
         for k, val in a.truth.items():
             assert dv[k]["lower"] < val < dv[k]["upper"], (n, k, val, dv[k])
         # the transducer cart reaches s_M after the settle time and before the end

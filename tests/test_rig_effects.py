@@ -17,7 +17,11 @@ from lss_fmu import measurement as M
 from lss_fmu import rig
 from lss_fmu import rig_effects as E
 from lss_fmu.layouts import load_track
-from lss_fmu.rig_cli import rig_main
+from lss_app.cli import main as lss
+
+
+def rig_main(argv: list) -> int:
+    return lss(["rig", *argv])
 from lss_fmu.sensor import SensorModel
 from lss_fmu.variables import BY_NAME, FORCE_CHANNELS
 

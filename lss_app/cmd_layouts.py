@@ -1,16 +1,17 @@
-"""`lss layouts ...`: Table 2 as measured, the closure checker, the drawings.
+"""`lss layouts ...`: Table 2 as measured, the closure checker, the drawings,
+and the generator of the built-in layout files.
 
     lss layouts                          Table 2 measured from the built-in files
     lss layouts check FILE|NAME ...      closure in position and direction (exit 1 on failure)
     lss layouts plot NAME|FILE [--out DIR] [--format png,svg]
+    lss layouts design [--check]         write the seven layouts from their designs (lss_fmu.layout_design)
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
-from .layouts import (TABLE2, LayoutError, builtin_layouts, load_track, summary, table2_mismatches)
+from lss_fmu.layouts import TABLE2, LayoutError, builtin_layouts, load_track, summary, table2_mismatches
 
 
 def _table(out) -> int:
@@ -52,7 +53,7 @@ def _check(targets: list, out, err) -> int:
 
 
 def _plot(target: str, out_dir: str, formats: str, out, err) -> int:
-    from .layout_plot import save_layout_plot
+    from .figures.layout import save_layout_plot
     fmts = [f.strip().lower() for f in formats.split(",") if f.strip()]
     unknown = [f for f in fmts if f not in ("png", "svg", "pdf")]
     if not fmts or unknown:
@@ -68,28 +69,40 @@ def _plot(target: str, out_dir: str, formats: str, out, err) -> int:
     return 0
 
 
-def layouts_main(argv: list, out=None, err=None) -> int:
-    out = out or sys.stdout
-    err = err or sys.stderr
-    ap = argparse.ArgumentParser(prog="lss layouts", description="Track layouts: Table 2, checks, drawings.")
-    sub = ap.add_subparsers(dest="cmd")
-    sub.add_parser("table", help="Table 2 measured from the built-in layout files (the default)")
-    chk = sub.add_parser("check", help="check layout files: syntax, closure, motors")
+def _design(check: bool, out, err) -> int:
+    from lss_fmu.layout_design import DESIGNS, LAYOUT_DIR, generate
+    stale = generate(check=check)
+    if check:
+        for n in stale:
+            print(f"{n}.layout differs from its design", file=err)
+        return 1 if stale else 0
+    print(f"wrote {len(DESIGNS)} layouts to {LAYOUT_DIR} ({len(stale)} changed)", file=out)
+    return 0
+
+
+def register(sub, common) -> None:
+    ap = sub.add_parser("layouts", parents=[common], help="list, check, draw and design track layouts",
+                        description="Track layouts: Table 2, checks, drawings.")
+    ap.set_defaults(run=run, cmd=None)
+    lsub = ap.add_subparsers(dest="cmd")
+    lsub.add_parser("table", help="Table 2 measured from the built-in layout files (the default)")
+    chk = lsub.add_parser("check", help="check layout files: syntax, closure, motors")
     chk.add_argument("files", nargs="+", metavar="FILE", help="layout file or built-in name")
-    plt = sub.add_parser("plot", help="draw a layout (top view and elevation profile)")
+    plt = lsub.add_parser("plot", help="draw a layout (top view and elevation profile)")
     plt.add_argument("layout", metavar="NAME|FILE")
     plt.add_argument("--out", default=".", help="output directory (default: .)")
     plt.add_argument("--format", default="png,svg", help="comma-separated: png, svg, pdf (default png,svg)")
-    try:
-        args = ap.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    des = lsub.add_parser("design", help="write the built-in layout files from their designs")
+    des.add_argument("--check", action="store_true", help="only report files that differ from the designs")
+
+
+def run(args, out=None, err=None) -> int:
+    out = out or sys.stdout
+    err = err or sys.stderr
     if args.cmd in (None, "table"):
         return _table(out)
     if args.cmd == "check":
         return _check(args.files, out, err)
+    if args.cmd == "design":
+        return _design(args.check, out, err)
     return _plot(args.layout, args.out, args.format, out, err)
-
-
-if __name__ == "__main__":
-    sys.exit(layouts_main(sys.argv[1:]))

@@ -11,10 +11,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from lss_fmu.design import LABELS  # noqa: E402
 from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
-
-LABELS = ["joint F_x", "joint F_y", "joint F_z", "steering left", "steering right",
-          "driving left", "driving right"]
 
 
 def forces_overlay(times, measured, initial, optimum, path: Path, title: str,

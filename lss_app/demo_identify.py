@@ -2,7 +2,7 @@
 built-in layout 7 by the virtual transducer cart, the identification of its
 four CoRs with Complex-RF, the report (identified against true values, the
 paper's figures), and closing the loop on data with an undeclared effect
-(identification.demo_close_loop)."""
+(lss_app.demo_close_loop)."""
 from __future__ import annotations
 
 import time
@@ -20,9 +20,11 @@ def run_stages(out: Path) -> list[str]:
     from lss_fmu.rig import folder_name, load_truth, run_measurement
     from lss_fmu.runner import ChainSimulator
 
-    from .figures import forces_overlay, history, nrmsd_bars
-    from .identify import identify
-    from .problem import DESIGN, SHORT, from_measurement
+    from identification.identify import identify
+    from identification.problem import from_measurement
+    from lss_fmu.design import CORS, symbol
+
+    from .figures.identification import forces_overlay, history, nrmsd_bars
 
     data = out / "data"
     print(f"[2] the virtual transducer cart: recovery measurement {MEASUREMENT} (layout 7) ...", flush=True)
@@ -33,7 +35,7 @@ def run_stages(out: Path) -> list[str]:
     truth = load_truth(folder)
 
     print(f"[3] identifying e_JA, e_JR, e_SW, e_RW with Complex-RF ({BUDGET} evaluations) ...", flush=True)
-    cors = tuple(DESIGN[:4])
+    cors = CORS
     problem = from_measurement(meas, "LW", free=cors, window=WINDOW)
     work = out / "identify"
     work.mkdir(parents=True, exist_ok=True)
@@ -51,7 +53,7 @@ def run_stages(out: Path) -> list[str]:
     true = truth.get("cor", truth)
     rows = ["| CoR | true | start | identified |", "|---|---|---|---|"]
     for k, x0, x in zip(cors, res.x0, res.x):
-        short = SHORT[k]
+        short = symbol(k)
         tv = true.get(short, true.get(k, float("nan"))) if isinstance(true, dict) else float("nan")
         rows.append(f"| {short} | {tv:.3f} | {x0:.3f} | {x:.3f} |")
     sections = [

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .track_geometry import Track
+from lss_fmu.track_geometry import Track
 
 TRACK_WIDTH = 0.6  # m, drawn distance between the two track lines
 LEVEL_COLOUR, SPIRAL_COLOUR, MOTOR_COLOUR = "#f4a259", "#5b8dd6", "#2a9d4b"

@@ -6,16 +6,15 @@
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
-from typing import Optional, Sequence
 
 
-def _parser() -> argparse.ArgumentParser:
-    from . import rig
-    ap = argparse.ArgumentParser(
-        prog="lss rig",
+def register(sub, common) -> None:
+    from lss_fmu import rig
+    from lss_fmu.rig_effects import ARTEFACTS, CATALOGUE
+    ap = sub.add_parser(
+        "rig", parents=[common], help="synthesise measurements with the virtual transducer cart",
         description="Synthesise the paper's 22 transducer-cart measurements with the virtual transducer cart "
                     "(FMU + sensor model). Measurement folders go to DIR/mNN, the truth to DIR/answers/ "
                     "(never read by identification). See docs/measurements.md.")
@@ -36,7 +35,6 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--lap-seconds", type=float, default=None, metavar="T",
                     help="log only T seconds instead of one lap (quick checks; such measurements are "
                          "marked as partial)")
-    from .rig_effects import ARTEFACTS, CATALOGUE
     ap.add_argument("--effects", metavar="LIST", default=None,
                     help=f"undeclared effects to switch on in the FMU, comma separated, or all (known: "
                          f"{', '.join(CATALOGUE)}); drawn per layout from --effect-seed; meta.json says "
@@ -47,19 +45,13 @@ def _parser() -> argparse.ArgumentParser:
                     help=f"artefacts outside the effects catalogue, added in the sensor stage (known: "
                          f"{', '.join(ARTEFACTS)})")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return ap
+    ap.set_defaults(run=run)
 
 
-def rig_main(argv: Optional[Sequence[str]] = None) -> int:
-    """Entry point of `lss rig`; returns the exit code (0 ok, 1 a measurement
-    failed, 2 a usage error)."""
-    from . import rig
-    ap = _parser()
-    try:
-        args = ap.parse_args(list(argv) if argv is not None else None)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    from .rig_effects import parse_artefacts, parse_effects
+def run(args) -> int:
+    """`lss rig`; returns the exit code (0 ok, 1 a measurement failed, 2 a usage error)."""
+    from lss_fmu import rig
+    from lss_fmu.rig_effects import parse_artefacts, parse_effects
     try:
         numbers = rig.parse_numbers(args.measurements)
         effects = parse_effects(args.effects, "--effects")
@@ -68,7 +60,7 @@ def rig_main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"lss rig: {exc}", file=sys.stderr)
         return 2
     if args.effects is not None and not effects:
-        from .rig_effects import CATALOGUE
+        from lss_fmu.rig_effects import CATALOGUE
         print(f"lss rig: --effects: no effect named (known: {', '.join(CATALOGUE)}, or all)", file=sys.stderr)
         return 2
     if args.effect_seed is not None and not (effects or artefacts):
@@ -110,7 +102,3 @@ def rig_main(argv: Optional[Sequence[str]] = None) -> int:
         print(f"lss rig: {len(failed)} measurement(s) failed; see above", file=sys.stderr)
         return 1
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(rig_main())

@@ -1,53 +1,21 @@
-"""The paper's section 4 from a campaign's results: a Table-3 style CoR table
-per model, the final objectives per model with a one-way ANOVA and a
-Kruskal-Wallis test (objectives are not normal), and box plots of the CoRs
-per contact class and per wheel or joint type with the bounds drawn
-(Figs. 12-16). One Markdown report with its figures.
+"""The campaign report (the paper's section 4) from a campaign's results: a
+Table-3 style CoR table per model, the final objectives per model with the
+tests of identification.stats, and box plots of the CoRs per contact class
+and per wheel or joint type with the bounds drawn (Figs. 12-16). One
+Markdown report with its figures.
 
     lss report CAMPAIGN_DIR
 """
 from __future__ import annotations
 
-import argparse
-import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy import stats
 
-from lss_fmu.atomic import write_atomic
-
-from .problem import COR_BOUNDS, DESIGN
-
-CORS = {"contact.e_JA": "e_JA", "contact.e_JR": "e_JR", "contact.e_SW": "e_SW", "contact.e_RW": "e_RW"}
-
-
-def load_results(campaign: Path) -> pd.DataFrame:
-    files = sorted((Path(campaign) / "results").glob("*.json"))
-    if not files:
-        raise FileNotFoundError(f"{campaign}/results holds no result: run `lss campaign` first")
-    rows = []
-    for f in files:
-        r = json.loads(f.read_text())
-        row = {"measurement": r["measurement"], "number": r.get("number"), "model": r["model"], "f": r["f"],
-               "f0": r["f0"], "nfev": r["nfev"], "wheel_type": r.get("wheel_type"),
-               "coupling_type": r.get("coupling_type"), "layout": r.get("layout")}
-        for k, short in CORS.items():
-            row[short] = r["values"].get(short, np.nan)
-        rows.append(row)
-    return pd.DataFrame(rows).sort_values(["model", "number", "measurement"])
-
-
-def model_tests(df: pd.DataFrame) -> dict:
-    groups = [g["f"].to_numpy() for _, g in df.groupby("model") if len(g) > 1]
-    if len(groups) < 2:
-        return {"anova_p": float("nan"), "kruskal_p": float("nan"), "note": "fewer than two models"}
-    anova = stats.f_oneway(*groups)
-    kw = stats.kruskal(*groups)
-    return {"anova_F": float(anova.statistic), "anova_p": float(anova.pvalue),
-            "kruskal_H": float(kw.statistic), "kruskal_p": float(kw.pvalue)}
+from identification.stats import load_results, model_tests
+from lss_fmu.atomic import write_atomic, write_json_atomic
+from lss_fmu.design import COR_BOUNDS
 
 
 def _box(ax, data: dict, title: str, bounds=None, log=False):
@@ -119,19 +87,5 @@ def write_report(campaign: Path) -> Path:
     lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]
     lines += [f"![{f}]({f})" for f in figs[1:]] + [""]
     write_atomic(out / "report.md", "\n".join(lines))
-    from lss_fmu.atomic import write_json_atomic
     write_json_atomic(out / "statistics.json", {"tests": tests, "summary": summ.reset_index().to_dict("records")})
     return out / "report.md"
-
-
-def main(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="lss report", description=__doc__.splitlines()[0])
-    ap.add_argument("campaign")
-    args = ap.parse_args(argv)
-    path = write_report(Path(args.campaign))
-    print(f"wrote {path}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))

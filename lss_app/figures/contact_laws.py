@@ -1,6 +1,6 @@
 """Figures and numbers of docs/contact_laws.md.
 
-    .venv/bin/python -m lss_fmu.contact_figure [--out docs/figures] [--table]
+    lss figures contact-laws [--out docs/figures] [--table]
 
 writes
   restitution_laws.png/.svg   effective restitution v_out/v_in against the
@@ -15,14 +15,13 @@ and prints the tables quoted in the document (--table: as Markdown).
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
-from . import contact_laws as cl
+from lss_fmu import contact_laws as cl
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FIG_DIR = ROOT / "docs" / "figures"
 
 COLORS = {"HC": "tab:blue", "HW": "tab:orange", "LW": "tab:green", "LN": "tab:red", "GZ": "black",
@@ -170,22 +169,3 @@ def accuracy(markdown: bool = False) -> str:
         return "\n".join(["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
                          + ["| " + " | ".join(r) + " |" for r in rows])
     return "\n".join(["  ".join(head)] + ["  ".join(r) for r in rows])
-
-
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", type=Path, default=FIG_DIR, help="figure folder (default docs/figures)")
-    ap.add_argument("--table", action="store_true", help="print the tables as Markdown")
-    ap.add_argument("--no-figures", action="store_true")
-    args = ap.parse_args(argv)
-    if not args.no_figures:
-        for p in make_figures(args.out):
-            print("wrote", p)
-    print(tables(markdown=args.table))
-    print()
-    print("max |e_eff - e_pred| over the grid (mean accepted steps per impact)")
-    print(accuracy(markdown=args.table))
-
-
-if __name__ == "__main__":
-    main()

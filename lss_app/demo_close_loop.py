@@ -26,10 +26,11 @@ EXT_EVALS = 200
 
 
 def run_close_loop_stage(out: Path) -> list[str]:
-    from .catalogue import CATALOGUE
-    from .close_loop import close_loop
+    from identification.catalogue import CATALOGUE
+    from identification.close_loop import close_loop
+    from identification.synthetic import effect_case
+
     from .close_loop_report import write_report
-    from .synthetic import effect_case
 
     work = out / "close_loop"
     work.mkdir(parents=True, exist_ok=True)

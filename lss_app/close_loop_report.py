@@ -15,8 +15,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .catalogue import CATALOGUE  # noqa: E402
-from .figures import LABELS, forces_overlay, nrmsd_bars  # noqa: E402
+from identification.catalogue import CATALOGUE  # noqa: E402
+from identification.close_loop import CONFIRM, SHARE_MIN  # noqa: E402
+from lss_fmu.design import LABELS  # noqa: E402
+
+from .figures.identification import forces_overlay, nrmsd_bars  # noqa: E402
 
 
 def ranking_figure(rnd, path: Path, threshold: float) -> Path:
@@ -43,7 +46,6 @@ def ranking_figure(rnd, path: Path, threshold: float) -> Path:
 
 
 def write_report(res, out: Path) -> Path:
-    from .close_loop import CONFIRM, SHARE_MIN
     out = Path(out)
     p = res.problem
     lines = [f"# Closing the loop: {p.name}, model {p.model}", "",
@@ -88,7 +90,9 @@ def _residual_section(rnd, out: Path) -> list:
         return []
     lines = []
     try:
-        from .residual import describe, residual_figures
+        from identification.residual import describe
+
+        from .figures.residual import residual_figures
         figs = residual_figures(ra, out / f"round{rnd.number}_residual")
         lines += ["### Residual", "", describe(ra), ""]
         lines += [f"![{f.stem}]({f.relative_to(out)})" for f in figs if f.suffix == ".png"]

@@ -7,20 +7,13 @@
 3. close the loop: analyse the residual, trace it to a missing effect, extend
    the model and report the error before and after.
 
-Each stage uses what the installed package provides; the output folder gets a
-README.md that links the figures and tables of every stage that ran.
+The output folder gets a README.md that links the figures and tables of
+every stage. `lss demo --out DIR`; `make demo` runs it into demo_out/.
 """
 from __future__ import annotations
 
-import argparse
-import importlib.util
-import sys
 import time
 from pathlib import Path
-
-
-def _have(module: str) -> bool:
-    return importlib.util.find_spec(module) is not None
 
 
 def simulate_and_plot(out: Path) -> list[str]:
@@ -28,8 +21,8 @@ def simulate_and_plot(out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .runner import ChainSimulator
-    from .variables import FORCE_CHANNELS
+    from lss_fmu.runner import ChainSimulator
+    from lss_fmu.variables import FORCE_CHANNELS
 
     with ChainSimulator() as sim:
         t0 = time.process_time()
@@ -51,22 +44,21 @@ def simulate_and_plot(out: Path) -> list[str]:
             f"({n * 12 / cpu:.0f} cart-s per CPU-s).\n\n![forces](simulation_layout7.png)\n"]
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="demo_out")
-    args = ap.parse_args(argv)
+def register(sub, common) -> None:
+    ap = sub.add_parser("demo", parents=[common], help="the main job end to end on a built-in layout",
+                        description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
+    ap.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from .demo_identify import run_stages
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sections = ["# LSS demo\n"]
     print("[1] simulating layout 7 ...", flush=True)
     sections += simulate_and_plot(out)
-    if _have("identification.demo_stages"):
-        from identification.demo_stages import run_stages
-        sections += run_stages(out)
+    sections += run_stages(out)
     (out / "README.md").write_text("\n".join(sections))
     print(f"demo written to {out}/README.md")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 """Figures of a residual analysis (identification.residual), PNG and SVG.
 
-    from identification.residual_figures import residual_figures
+    from lss_app.figures.residual import residual_figures
     paths = residual_figures(analysis, "out/m20/residual", measured, simulated)
 
 1. residual_time    residual per channel over time, its mean dashed, track
@@ -30,7 +30,8 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter, NullFormatter  # noqa: E402
 
-from .residual import LABELS, LINE_SNR_THRESHOLD, ResidualAnalysis, _matrix  # noqa: E402
+from identification.residual import LINE_SNR_THRESHOLD, ResidualAnalysis, as_matrix  # noqa: E402
+from lss_fmu.design import LABELS  # noqa: E402
 
 KIND_COLOUR = {"curve": "0.88", "spiral": "#cfe0f5", "vcurve": "#fbe3c8"}
 KIND_NAME = {"curve": "horizontal curve", "spiral": "spiral", "vcurve": "vertical curve"}
@@ -343,6 +344,6 @@ def residual_figures(analysis: ResidualAnalysis, out_dir, measured=None, simulat
     paths += _save(_fig_signals(analysis), out, f"{prefix}_signals", formats)
     if measured is not None and simulated is not None:
         n = analysis.residual.shape[0]
-        M, S = _matrix("measured", measured, n), _matrix("simulated", simulated, n)
+        M, S = as_matrix("measured", measured, n), as_matrix("simulated", simulated, n)
         paths += _save(_fig_forces(analysis, M, S), out, f"{prefix}_forces", formats)
     return paths

@@ -1,0 +1,1 @@
+"""The figures of the application: matplotlib lives here, not in the libraries."""
