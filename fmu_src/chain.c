@@ -169,6 +169,12 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
     m->pretension = p->chain_pretension;
     m->tol = p->solver_tolerance;
     m->h_max = p->solver_h_max;
+    m->s_start = p->chain_s_start;
+    if (!(m->s_start < m->track.length)) {
+        snprintf(err, errlen, "chain.s_start = %.17g is invalid: must lie in [0, %.17g), the track length",
+                 m->s_start, m->track.length);
+        goto fail;
+    }
     cart_geometry_init(&m->g, &m->type, m->track.length / m->n_carts, p->track_guide_gap, p->cart_mass_factor);
     if (allocate(c)) {
         snprintf(err, errlen, "out of memory for a chain of %d carts", m->n_carts);
@@ -184,19 +190,15 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
     }
     chain_set_inputs(c, p);
     double v0 = p->chain_v_init >= 0 ? p->chain_v_init : p->drive_v_ref;
+    if (p->chain_relax_time > 0 && v0 != 0.0) {
+        snprintf(err, errlen, "chain.relax_time = %g s needs a chain that starts at rest: chain.v_init = 0 "
+                 "(it is %g m/s)", p->chain_relax_time, v0);
+        goto fail;
+    }
     if (chain_initial_state(c, v0, err, errlen)) goto fail;
     chain_solver_init(c);
     dopri_reset(&c->st.ode, 0.0, 1e-4);
-    /* contact memory at the start: closed contacts use the floor */
-    chain_rhs(c, 0.0, c->st.y, c->ode.k[0]);
-    c->st.ode.n_rhs = 1;
-    for (int k = 0; k < N_SLOT * m->n_carts; k++) {
-        c->st.v_onset[k] = c->sc.delta[k] > 0 ? m->v_min : 0.0;
-        c->st.delta_prev[k] = c->sc.delta[k];
-        c->st.ddelta_prev[k] = c->sc.ddelta[k];
-    }
-    c->st.ode.fsal_valid = 1;
-    c->scratch_at_state = 1;
+    chain_start_memory(c);
     return c;
 fail_spec:
     layout_spec_free(&spec, a);
@@ -206,11 +208,36 @@ fail:
 }
 
 void chain_set_inputs(Chain *c, const LSSParams *p) {
-    if (c->st.v_ref != p->drive_v_ref || c->st.Kp != p->drive_Kp || c->st.Ki != p->drive_Ki)
-        c->st.ode.fsal_valid = c->scratch_at_state = 0;
+    ChainModel *m = &c->m;
+    const double es[CC_N] = {p->contact_e_JA, p->contact_e_JR, p->contact_e_SW, p->contact_e_RW};
+    int changed = c->st.v_ref != p->drive_v_ref || c->st.Kp != p->drive_Kp || c->st.Ki != p->drive_Ki ||
+                  m->mu_roll != p->wheel_mu_roll;
+    for (int k = 0; k < CC_N; k++)
+        if (m->law[k].e != es[k]) {  /* solved once per change (GZ: a root), never per step */
+            double chi = contact_chi(m->law_code, es[k]);
+            if (!isfinite(chi)) continue;  /* cannot happen within the checked range; keep the old law */
+            m->law[k].e = es[k];
+            m->law[k].chi = chi;
+            changed = 1;
+        }
+    if (changed) c->st.ode.fsal_valid = c->scratch_at_state = 0;
+    m->mu_roll = p->wheel_mu_roll;
     c->st.v_ref = p->drive_v_ref;
     c->st.Kp = p->drive_Kp;
     c->st.Ki = p->drive_Ki;
+}
+
+void chain_start_memory(Chain *c) {
+    const ChainModel *m = &c->m;
+    chain_rhs(c, c->st.ode.t, c->st.y, c->ode.k[0]);
+    c->st.ode.n_rhs = 1;
+    for (int k = 0; k < N_SLOT * m->n_carts; k++) {
+        c->st.v_onset[k] = c->sc.delta[k] > 0 ? m->v_min : 0.0;
+        c->st.delta_prev[k] = c->sc.delta[k];
+        c->st.ddelta_prev[k] = c->sc.ddelta[k];
+    }
+    c->st.ode.fsal_valid = 1;
+    c->scratch_at_state = 1;
 }
 
 /* Snapshot layout: header, then y, s_hint, v_onset, delta_prev, ddelta_prev

@@ -63,6 +63,8 @@ typedef struct {
 /* Parameters of the wheel/coupling type; returns 0 for an unknown type. */
 int cart_type_lookup(char wheel, char coupling, CartType *out);
 
+/* Fixed once built, but for the tunable parameters (the CoRs in law[], mu_roll)
+ * that chain_set_inputs adopts. */
 typedef struct ChainModel {
     LSSAlloc alloc;
     Track track;
@@ -74,6 +76,7 @@ typedef struct ChainModel {
     int law_code;
     double v_min, mu_roll, F_max, motor_length, pretension, preload, gravity;
     double tol, h_max;
+    double s_start;                   /* arc position of cart 0's axle as assembled, m */
     Effects fx;                       /* the effects catalogue (effects.h) */
     double *mass;                     /* [N] mass of each cart, kg (g.mass unless the masses differ) */
     double *inertia;                  /* [3N] its principal moments, kg m^2 */
@@ -141,8 +144,17 @@ void chain_free(Chain *c);
  * or a message naming the variable and the value. */
 int chain_check_params(const LSSParams *p, char *err, size_t errlen);
 
-/* Adopts the tunable parameters and inputs (v_ref, Kp, Ki). */
+/* Adopts the tunable parameters and inputs (v_ref, Kp, Ki, the CoRs, mu_roll). */
 void chain_set_inputs(Chain *c, const LSSParams *p);
+
+/* Static equilibrium of a chain at rest: relaxes it for T s (drive off,
+ * kinetic damping, fixed contact damping so that the result does not depend
+ * on the CoRs), then starts the clock at 0 at rest. 0, or 1 with a message. */
+int chain_relax(Chain *c, double T, char *err, size_t errlen);
+
+/* The contact memory of a fresh start: closed contacts use the floor v_min
+ * (evaluates the right-hand side at the current state). */
+void chain_start_memory(Chain *c);
 
 /* Sets up the solver (tolerance, error scales, callbacks, workspace). */
 void chain_solver_init(Chain *c);

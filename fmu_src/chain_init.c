@@ -112,29 +112,30 @@ int chain_initial_state(Chain *c, double v0, char *err, size_t errlen) {
     const LSSAlloc *a = &m->alloc;
     double delta_static = pow(0.5 * g->mass * m->gravity / m->law[CC_RW].K, 1.0 / m->law[CC_RW].n);
     Assembly as = {&m->track, g->r_drive - delta_static};
+    double s0 = m->s_start;   /* cart 0's axle, arc length */
 
     /* secant on the assembled pitch, fixed point on the start joint */
     double p0 = m->track.length / N, p1 = p0 * (1 + 1e-3), J0[3], JN[3];
     {
         TrackFrame f;
         double A[3], t[3];
-        axle_target(&as, 0.0, NULL, A, &f);
+        axle_target(&as, s0, NULL, A, &f);
         m3_col(t, f.R, 0);
         double dx = g->x_axle + 0.5 * p0;
         v3_copy(J0, A);
         v3_axpy(J0, -dx, t);  /* first guess: behind the axle along the tangent */
     }
-    double f0 = march(&as, g, N, p0, 0.0, J0, JN, NULL, NULL, NULL);
-    start_joint(&as, g, p0, 0.0, JN, J0);
-    double f1 = march(&as, g, N, p1, 0.0, J0, JN, NULL, NULL, NULL);
+    double f0 = march(&as, g, N, p0, s0, J0, JN, NULL, NULL, NULL);
+    start_joint(&as, g, p0, s0, JN, J0);
+    double f1 = march(&as, g, N, p1, s0, J0, JN, NULL, NULL, NULL);
     for (int it = 0; it < 60; it++) {
-        start_joint(&as, g, p1, 0.0, JN, J0);
+        start_joint(&as, g, p1, s0, JN, J0);
         if (fabs(f1) <= 1e-11 * m->track.length && it > 1) break;
         if (f1 == f0) break;
         double p2 = p1 - f1 * (p1 - p0) / (f1 - f0);
         p0 = p1; f0 = f1;
         p1 = p2;
-        f1 = march(&as, g, N, p1, 0.0, J0, JN, NULL, NULL, NULL);
+        f1 = march(&as, g, N, p1, s0, J0, JN, NULL, NULL, NULL);
     }
     if (!isfinite(p1) || fabs(f1) > 1e-6 || p1 <= 0) {
         snprintf(err, errlen, "cannot assemble %d carts into the %.6g m track (closure miss %.3g m)",
@@ -155,7 +156,7 @@ int chain_initial_state(Chain *c, double v0, char *err, size_t errlen) {
         return 1;
     }
     for (int k = 0; k < 3; k++) {
-        double sh = k == 0 ? 0.0 : (k == 1 ? eps : -eps), J0k[3], JNk[3];
+        double sh = s0 + (k == 0 ? 0.0 : (k == 1 ? eps : -eps)), J0k[3], JNk[3];
         v3_copy(J0k, J0);
         if (k > 0) {
             march(&as, g, N, p1, sh, J0, JNk, NULL, NULL, NULL);

@@ -112,6 +112,11 @@ static fmi2Status build_chain(Instance *in) {
             LOG_ERROR(in, "cannot build the chain: %s (layout.name = '%s')", err, p.layout_name);
         return fmi2Error;
     }
+    if (p.chain_relax_time > 0 && chain_relax(c, p.chain_relax_time, err, sizeof err)) {
+        chain_free(c);
+        LOG_ERROR(in, "cannot relax the chain at rest for chain.relax_time = %g s: %s", p.chain_relax_time, err);
+        return fmi2Error;
+    }
     chain_free(in->chain);
     in->chain = c;
     in->chain_stale = 0;

@@ -24,9 +24,13 @@ from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFr
                        fmi2Warning)
 
 from . import build
-from .variables import FORCE_CHANNELS, SPEED_CHANNELS
+from .variables import FORCE_CHANNELS, SPEED_CHANNELS, VARIABLES
 
 DEFAULT_OUTPUTS = FORCE_CHANNELS + SPEED_CHANNELS + ["transducer.s", "chain.v_mean"]
+# what may change after initialisation, with the FMU's default: a relaxed chain at rest serves every value
+TUNABLE = {v.name: v.start for v in VARIABLES if v.causality in ("parameter", "input")
+           and v.variability in ("tunable", "continuous")}
+REST_STATES = 4     # relaxed chains kept per simulator
 
 
 class SimulationError(RuntimeError):
@@ -78,6 +82,7 @@ class ChainSimulator:
         self.fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
         self._used = False
         self._closed = False
+        self._rest: dict = {}   # relaxed chains at rest: key -> FMU state (start)
 
     # -- messages ---------------------------------------------------------------
     def _log(self, env, instance, status, category, message):
@@ -127,20 +132,59 @@ class ChainSimulator:
     # -- runs ----------------------------------------------------------------------
     def start(self, params: Optional[Mapping[str, object]] = None, tolerance: Optional[float] = None,
               start_time: float = 0.0) -> None:
-        """Reset (if used), set parameters, initialise."""
+        """Reset (if used), set parameters, initialise.
+
+        A chain that starts at rest relaxes into its static equilibrium first
+        (chain.relax_time > 0), which does not depend on the tunable values
+        (the CoRs, mu_roll, the gains, the speed reference): the relaxed state
+        is kept as an FMU state, one per set of the other values, and a later
+        start with the same other values restores it and sets its own tunable
+        values on it instead of relaxing again."""
         self.messages.clear()
+        params = dict(params or {})
+        key = self._rest_key(params, tolerance, start_time)
+        if key is not None and key in self._rest:
+            self._rest[key] = self._rest.pop(key)  # most recently used last
+            try:
+                self.fmu.setFMUstate(self._rest[key])
+                for name, value in self._tunables(params).items():
+                    self.set(name, value)
+            except FMICallException as exc:
+                raise self._fail("restoring the relaxed chain failed", exc) from None
+            self._used = True
+            self.time = start_time
+            return
         if self._used:
             self.fmu.reset()
         self._used = True
         try:
-            for name, value in (params or {}).items():
+            for name, value in params.items():
                 self.set(name, value)
             self.fmu.setupExperiment(tolerance=tolerance, startTime=start_time)
             self.fmu.enterInitializationMode()
             self.fmu.exitInitializationMode()
+            if key is not None:
+                self._keep_rest(key)
         except FMICallException as exc:
             raise self._fail("initialisation failed", exc) from None
         self.time = start_time
+
+    def _rest_key(self, params: Mapping[str, object], tolerance, start_time) -> Optional[tuple]:
+        """What the relaxed equilibrium depends on (None: not a start from rest)."""
+        if not float(params.get("chain.relax_time", 0.0) or 0.0) > 0:
+            return None
+        fixed = tuple(sorted((k, repr(v)) for k, v in params.items() if k not in TUNABLE))
+        return fixed + (("tolerance", repr(tolerance)), ("start_time", repr(start_time)))
+
+    def _tunables(self, params: Mapping[str, object]) -> dict:
+        """Every tunable value of a run: given, else the FMU's default (as a fresh start has it)."""
+        return {name: params.get(name, default) for name, default in TUNABLE.items()}
+
+    def _keep_rest(self, key: tuple) -> None:
+        while len(self._rest) >= REST_STATES:
+            old = self._rest.pop(next(iter(self._rest)))
+            self.fmu.freeFMUstate(old)
+        self._rest[key] = self.fmu.getFMUstate()
 
     def step(self, h: float) -> None:
         try:
@@ -256,6 +300,12 @@ class ChainSimulator:
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            for state in self._rest.values():
+                try:
+                    self.fmu.freeFMUstate(state)
+                except Exception:
+                    pass
+            self._rest.clear()
             try:
                 self.fmu.terminate()
             except Exception:
