@@ -32,7 +32,7 @@ class Task:
     max_evals: int
     seed: int
     window: Optional[float]
-    settle: float
+    settle: Optional[float]
     free: Optional[tuple]
     tare: bool = False   # take out zero errors within the transducer's declared offset (from_measurement)
     restarts: int = 0    # identify(restarts=...)
@@ -73,7 +73,7 @@ def run_task(task: Task) -> dict:
 
 def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: int = 2,
                  scheduler: Optional[str] = None, max_evals: int = 5000, seed: int = 0,
-                 window: Optional[float] = None, settle: float = 4.0, free: Optional[tuple] = None,
+                 window: Optional[float] = None, settle: Optional[float] = None, free: Optional[tuple] = None,
                  progress: bool = True, client=None, tare: bool = False, restarts: int = 0) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
     from lss_fmu.design import parse_model

@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
 from lss_fmu.design import COR_BOUNDS, CORS, DESIGN, BY_SYMBOL, is_effect_parameter, symbol
+from lss_fmu.protocol import Protocol
 from lss_fmu.runner import LazySimulator
-from lss_fmu.variables import CONTACT_MODELS, FORCE_CHANNELS
+from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +60,8 @@ class IdentificationProblem:
     tare: Optional[np.ndarray] = None    # per force channel, N: zero tolerance taken out (None: Eq. 10-12 as is)
     anti_alias: Optional[tuple] = None   # (order, cutoff Hz, causal): the logger's Butterworth filter, if declared
     sample_rate: Optional[float] = None  # Hz; None: read off the times (triggered.sample_rate_of)
+    protocol: Protocol = field(default_factory=Protocol)  # what the sorter did (lss_fmu.protocol)
+    v_nominal: Optional[float] = None    # the record's nominal set point (scales a speed-step's v_from)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
 
     def __post_init__(self):
@@ -117,14 +121,31 @@ class IdentificationProblem:
             channels: Sequence[str] = FORCE_CHANNELS, times: Optional[np.ndarray] = None,
             history: float = 0.0) -> np.ndarray:
         """FMU outputs `channels` at `times` (default: the measured sample times)
-        after the trigger, at x with further FMU values `extra`, as simulated
-        (no sensor model). Raises on failure."""
-        from lss_fmu.triggered import simulate_triggered
+        after the record's t = 0, at x with further FMU values `extra`, as
+        simulated (no sensor model), the protocol followed: the set point on
+        its schedule, the chain from rest (start-up) or past the photocell
+        after its run-in (the others). Raises on failure."""
+        from lss_fmu.triggered import simulate_from_rest, simulate_triggered
         params, s_m = self.fmu_params(x)
         params.update(extra or {})
-        return simulate_triggered(self.sim(), params, s_m, self.times if times is None else times,
-                                  settle=self.settle, channels=channels, tolerance=self.tolerance,
-                                  sample_rate=self.rate, history=history)
+        times = self.times if times is None else times
+        v_s = float(params.get("drive.v_ref", BY_NAME["drive.v_ref"].start))
+        speed = self.protocol.schedule(v_s, self.v_nominal or v_s)
+        if self.protocol.from_rest:
+            params.update({"chain.v_init": 0.0, "chain.transducer": 0, "drive.v_ref": 0.0,
+                           "chain.s_start": s_m % self.track_length,
+                           "chain.relax_time": self.protocol.relax_time(self.track_length)})
+            return simulate_from_rest(self.sim(), params, times, channels, tolerance=self.tolerance,
+                                      sample_rate=self.rate, history=history, speed=speed)
+        params["drive.v_ref"] = self.protocol.v_before(v_s, self.v_nominal or v_s)
+        return simulate_triggered(self.sim(), params, s_m, times, settle=self.settle, channels=channels,
+                                  tolerance=self.tolerance, sample_rate=self.rate, history=history,
+                                  after_trigger=speed if self.protocol.transient else None)
+
+    @cached_property
+    def track_length(self) -> float:
+        from lss_fmu.layouts import load_track
+        return float(load_track(self.layout).length)
 
     @property
     def rate(self) -> float:
@@ -186,14 +207,24 @@ class IdentificationProblem:
 
 
 def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, window: Optional[float] = None,
-                     fixed: Optional[Mapping[str, object]] = None, settle: float = 4.0,
-                     tolerance: Optional[float] = None, tare: bool = False) -> IdentificationProblem:
+                     fixed: Optional[Mapping[str, object]] = None, settle: Optional[float] = None,
+                     tolerance: Optional[float] = None, tare: bool = False,
+                     sim: Optional[LazySimulator] = None) -> IdentificationProblem:
     """The problem of one loaded measurement (lss_fmu.measurement.Measurement):
     bounds of the layout-dependent variables from its metadata, CoRs 0.2..0.9,
-    starting at the nominal values and the middle of the CoR range. `window`
-    keeps only the first seconds of the record (quick runs and tests). `tare`:
-    take out zero errors within 3 sigma of the transducer's declared offset
-    (meta.json sensor.force_offset_std_N, else the virtual cart's)."""
+    starting at the nominal values and the middle of the CoR range, following
+    the record's protocol (meta.json `protocol`; none: steady running). `window`
+    keeps only the first seconds of the record. `settle`: the run-in before the
+    photocell is armed (default: the protocol's). `tolerance`: the solver's
+    (default: the FMU's, TRANSIENT_TOLERANCE for a transient record, where the
+    solver's error would otherwise exceed what the CoRs do). `tare`: take out
+    zero errors within 3 sigma of the transducer's declared offset (meta.json
+    sensor.force_offset_std_N, else the virtual cart's)."""
+    from lss_fmu.protocol import TRANSIENT_TOLERANCE
+    protocol = meas.protocol
+    settle = protocol.run_in if settle is None else float(settle)
+    if tolerance is None and protocol.transient:
+        tolerance = TRANSIENT_TOLERANCE
     t = np.asarray(meas.time, float)
     t = t - t[0]
     forces = meas.forces.to_numpy(float)
@@ -210,7 +241,7 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
         x0[name] = float(dv.nominal)
     extra = dict(meas.meta.get("fmu_parameters", {}) or {})
     extra.update(fixed or {})
-    if "chain.transducer" not in extra:
+    if "chain.transducer" not in extra and not protocol.from_rest:
         extra["chain.transducer"] = transducer_for(
             meas.track, float(x0.get("trigger.s_M", meas.meta["trigger_point"])),
             float(x0.get("drive.v_ref", meas.meta["speed_nominal"])), settle)
@@ -221,7 +252,9 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
         aa = None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
-                                 name=meas.id, tare=tol, anti_alias=aa, sample_rate=meas.sample_rate)
+                                 name=meas.id, tare=tol, anti_alias=aa, sample_rate=meas.sample_rate,
+                                 protocol=protocol, v_nominal=float(meas.meta["speed_nominal"]),
+                                 sim=sim or LazySimulator())
 
 
 FILTER_LEAD = 0.05   # s of simulated history before the trigger for the anti-alias filter (~12 time constants)

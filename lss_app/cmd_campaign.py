@@ -16,7 +16,8 @@ def register(sub, common) -> None:
     ap.add_argument("--max-evals", type=int, default=5000)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of each record")
-    ap.add_argument("--settle", type=float, default=4.0, help="simulated settling before the trigger is armed, s")
+    ap.add_argument("--settle", type=float, default=None,
+                    help="run-in before the photocell is armed, s (default: the record's protocol's)")
     ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")

@@ -44,6 +44,10 @@ def register(sub, common) -> None:
     ap.add_argument("--artefact", metavar="LIST", default=None,
                     help=f"artefacts outside the effects catalogue, added in the sensor stage (known: "
                          f"{', '.join(ARTEFACTS)})")
+    ap.add_argument("--protocol", default="steady", choices=rig.PROTOCOLS,
+                    help="what the sorter does while the cart logs (docs/measurements.md): steady running from "
+                         "the photocell for a lap (default), a start-up from standstill at full thrust, a speed "
+                         "step, a stop")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.set_defaults(run=run)
 
@@ -83,7 +87,7 @@ def run(args) -> int:
                                    fmu=args.fmu, lap_seconds=args.lap_seconds, overwrite=args.overwrite,
                                    progress=not args.no_progress,
                                    log=lambda msg: print(msg, file=sys.stderr), effects=effects,
-                                   effect_seed=args.effect_seed, artefacts=artefacts)
+                                   effect_seed=args.effect_seed, artefacts=artefacts, protocol=args.protocol)
     except (FileExistsError, ValueError, OSError) as exc:
         print(f"lss rig: {exc}", file=sys.stderr)
         return 2

@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 from .layout_format import LayoutError
-from . import design
+from . import design, protocol
 from .variables import BY_NAME, FORCE_CHANNELS, SPEED_CHANNELS
 
 FORMAT_VERSION = 1
@@ -76,6 +76,7 @@ OPTIONAL_META = {
     "Ki_nominal": ("number", "N/m per motor"),
     "design_variables": ("dict", "nominal value and bounds of v_s, d, mu_d, s_M, K_P, K_I"),
     "sensor": ("dict", "sensor and logger description"),
+    "protocol": ("protocol", "what the sorter did: steady, start-up, speed-step or stop (lss_fmu.protocol)"),
 }
 WHEEL_TYPES, COUPLING_TYPES = ("A", "B", "C"), ("A", "B")
 
@@ -162,6 +163,11 @@ class Measurement:
         return self.meta["layout"]
 
     @property
+    def protocol(self):
+        """What the sorter did while the cart logged (lss_fmu.protocol.Protocol)."""
+        return protocol_of(self.meta, self.path / META_FILE, self.duration)
+
+    @property
     def layout_for_fmu(self) -> str:
         """The FMU's layout.name: the built-in name or the absolute path of the file."""
         return _layout_for_fmu(self.meta["layout"], self.path)
@@ -220,10 +226,13 @@ def _type_ok(value, kind: str) -> bool:
         return isinstance(value, str)
     if kind == "dict":
         return isinstance(value, dict)
+    if kind == "protocol":
+        return isinstance(value, (dict, str))
     raise AssertionError(kind)
 
 
-_KIND_WORDS = {"int": "an integer", "number": "a number", "str": "a string", "dict": "an object"}
+_KIND_WORDS = {"int": "an integer", "number": "a number", "str": "a string", "dict": "an object",
+               "protocol": "an object or a protocol name"}
 
 
 def _json_kind(value) -> str:
@@ -285,9 +294,19 @@ def validate_meta(meta, path="meta.json", folder: Optional[Path] = None, check_l
                                f"{meta['date']!r}", path, "date") from None
     if "design_variables" in meta:
         _validate_design(meta["design_variables"], path)
+    protocol_of(meta, path)
     if check_layout:
         _validate_layout(meta, path, folder if folder is not None else Path(path).parent)
     return meta
+
+
+def protocol_of(meta: Mapping, path="meta.json", duration: Optional[float] = None):
+    """The record's protocol (lss_fmu.protocol), checked; a MeasurementError
+    names the meta.json field and the value the FMU cannot follow."""
+    try:
+        return protocol.from_meta(meta).check(float(meta["speed_nominal"]), duration)
+    except protocol.ProtocolError as exc:
+        raise MeasurementError(str(exc).split(": ", 1)[1], path, f"protocol.{exc.field}".rstrip(".")) from None
 
 
 def _parse_date(text: str):
@@ -547,6 +566,7 @@ def load_measurement(path: Union[str, Path], check_layout: bool = True) -> Measu
         raise MeasurementError("no such measurement folder", path)
     meta = read_meta(path / META_FILE, check_layout)
     samples = read_samples(path / SAMPLES_FILE, float(meta["sample_rate"]))
+    protocol_of(meta, path / META_FILE, len(samples) / float(meta["sample_rate"]))
     source = "meta.json" if "design_variables" in meta else "derived from the nominal values in meta.json"
     return Measurement(path, meta, samples, source)
 

@@ -54,6 +54,8 @@ from . import measurement as M
 from . import rig_effects as E
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
 from .layouts import NOMINAL_PRETENSION, TABLE2, load_track
+from .protocol import NAMES as PROTOCOLS
+from .protocol import Protocol
 from .sensor import CHANNELS, S_CHANNEL, SensorModel
 from .triggered import arriving_cart
 from .variables import BY_NAME, CONTACT_MODELS
@@ -63,6 +65,9 @@ DEFAULT_SEED = 20120901
 SETTLE_TIME = 4.0             # s: the trigger is armed after this (start transient)
 ARRIVAL_DELAY = (1.0, 2.0)    # s after arming: when the transducer cart reaches s_M (uniform)
 END_MARGIN = 1.0              # s simulated after the expected end of the lap
+TRANSIENT_RECORD = 4.0        # s logged in a transient protocol (start-up, speed step, stop)
+TRANSIENT_TOLERANCE = 1e-7    # the rig's solver tolerance there: ten times finer than identification's
+REST_LEAD = 0.5               # s of standstill the logger sees before a start command (filter, wheel counters)
 SPEED_MARGIN = 0.03           # relative: the lap may take this much longer than L / v_s
 
 # Table 2 order: measurements 1..22 are numbered layout by layout
@@ -111,6 +116,22 @@ FIELD_STRAIGHT_STD = 0.003          # m, every straight that is not solved for c
 # FMU parameters the field set would use if the FMU had them (issue 7 effects):
 # none are set unless present in the FMU and listed here by the lead.
 FIELD_EXTRA_FMU = {}
+
+
+def rig_protocol(name: str, v_nominal: float) -> Protocol:
+    """How the virtual test engineer runs each protocol: a start at full thrust
+    (the set point steps from 0 to v_s), a speed step from 3/4 of the nominal
+    set point and a stop with the set point dropped to 0 (the drive brakes),
+    both 1 s after the photocell."""
+    if name == "steady":
+        return Protocol("steady", run_in=SETTLE_TIME)
+    if name == "start-up":
+        return Protocol("start-up", ramp_time=0.0)
+    if name == "speed-step":
+        return Protocol("speed-step", step_time=1.0, v_from=round(0.75 * v_nominal, 3), run_in=SETTLE_TIME)
+    if name == "stop":
+        return Protocol("stop", step_time=1.0, run_in=SETTLE_TIME)
+    raise ValueError(f"unknown protocol {name!r} (known: {', '.join(PROTOCOLS)})")
 
 
 def numbering() -> dict:
@@ -198,6 +219,7 @@ class Case:
     effects: dict = dataclasses.field(default_factory=dict)     # name -> drawn parameters and details
     artefacts: dict = dataclasses.field(default_factory=dict)   # name -> definition (sensor stage)
     effect_seed: Optional[int] = None
+    protocol: Protocol = dataclasses.field(default_factory=Protocol)
 
     @property
     def id(self) -> str:
@@ -262,8 +284,9 @@ def _as_built_track(layout: str, seed: int, out_dir: Optional[Path]) -> tuple:
 def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir: Optional[Path] = None,
               lap_seconds: Optional[float] = None, extra_params: Optional[Mapping] = None,
               effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-              artefacts: Sequence[str] = ()) -> Case:
-    """The definition of measurement `number` of a set, drawn from the seed.
+              artefacts: Sequence[str] = (), protocol: str = "steady") -> Case:
+    """The definition of measurement `number` of a set, drawn from the seed,
+    measured with `protocol` (rig_protocol).
 
     The draws of the layout-dependent values depend only on (seed, layout) and
     (seed, number), not on the set or on which other measurements are made, so
@@ -316,16 +339,32 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
         params.update(FIELD_EXTRA_FMU)
     track = load_track(layout_fmu if set_name == "field" and layout_fmu != layout else layout)
     L, N = float(track.length), int(track.n_carts)
-    # the transducer cart: the one that reaches s_M about `arrival` s after the start
-    idx, arrival = arriving_cart(L, N, s_M, v, arrival, earliest=SETTLE_TIME + 0.3)
-    log = (L / v) * (1.0 + SPEED_MARGIN) if lap_seconds is None else float(lap_seconds)
-    stop = arrival + log + END_MARGIN
+    proto = rig_protocol(protocol, v_nom)
+    if proto.from_rest:
+        # the chain stopped wherever it stopped: the transducer cart's axle is parked at s_M, read off the
+        # track marks to 0.1 m (s_M_nom); cart 0 of the FMU is the transducer (the carts are alike)
+        rp = np.random.default_rng([seed, number, 7])
+        s_M_nom = round(float(rp.uniform(0.0, L)), 1) % L
+        s_M = (s_M_nom + _clip(rp.normal(0.0, SM_STD), -SM_MAX, SM_MAX)) % L
+        truth["s_M"] = s_M
+        idx, arrival = 0, 0.0
+        log = TRANSIENT_RECORD if lap_seconds is None else float(lap_seconds)
+        stop = log + END_MARGIN
+        start = {"chain.v_init": 0.0, "chain.relax_time": proto.relax_time(L), "chain.s_start": s_M,
+                 "drive.v_ref": 0.0}
+    else:
+        # the transducer cart: the one that reaches s_M about `arrival` s after the start
+        idx, arrival = arriving_cart(L, N, s_M, proto.v_before(v, v_nom), arrival, earliest=SETTLE_TIME + 0.3)
+        full = (L / v) * (1.0 + SPEED_MARGIN) if not proto.transient else TRANSIENT_RECORD
+        log = full if lap_seconds is None else float(lap_seconds)
+        stop = arrival + log + END_MARGIN
+        start = {"drive.v_ref": proto.v_before(v, v_nom)}
     params.update({
         "layout.name": layout_fmu,
         "contact.model": CONTACT_MODELS[law],
         **{f"contact.{k}": val for k, val in cor.items()},
         "chain.pretension": d, "wheel.mu_roll": mu, "drive.Kp": kp, "drive.Ki": ki, "drive.v_ref": v,
-        "chain.transducer": idx,
+        "chain.transducer": idx, **start,
     })
     eff, arts, eseed = {}, {}, None
     if effects or artefacts:
@@ -340,7 +379,7 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
     if extra_params:
         params.update(extra_params)
     return Case(set_name, number, seed, layout, layout_fmu, L, N, v_nom, d_nom, d_factor, s_M_nom, truth, cor,
-                law, params, field, idx, arrival, stop, eff, arts, eseed)
+                law, params, field, idx, arrival, stop, eff, arts, eseed, proto)
 
 
 def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) -> dict:
@@ -365,15 +404,33 @@ def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) ->
         "Kp_nominal": float(BY_NAME["drive.Kp"].start),
         "Ki_nominal": float(BY_NAME["drive.Ki"].start),
         "transducer_cart": "virtual transducer cart (lss_fmu.rig)",
-        "source": f"lss rig --set {case.set} --seed {case.seed}",
+        "source": f"lss rig --set {case.set} --seed {case.seed}" + (
+            f" --protocol {case.protocol.name}" if case.protocol.name != "steady" else ""),
         "notes": (f"Synthetic measurement {case.number} of the paper's campaign: layout {case.layout[-1]}, "
                   f"speed set point {case.speed_nominal:g} m/s, pretension {case.pretension_factor:g} x the "
-                  f"layout's nominal. Logging from the photocell at the trigger point "
-                  + ("for one lap." if full_lap else f"for {n_samples} samples (shortened run, not a full lap).")),
+                  f"layout's nominal. " + _logging_note(case, n_samples, full_lap)),
         "sensor": sensor.describe(),
     }
+    if case.protocol.name != "steady":   # a steady record reads as before: steady is the default
+        meta["protocol"] = case.protocol.to_meta()
     meta["design_variables"] = design.bounds_from_meta(meta)
     return meta
+
+
+def _logging_note(case: Case, n_samples: int, full_lap: bool) -> str:
+    p = case.protocol
+    if p.from_rest:
+        return (f"Start-up from standstill, the transducer cart parked at the trigger point; the set point "
+                f"steps to {case.speed_nominal:g} m/s at the start command, which starts logging "
+                f"({n_samples} samples).")
+    if p.name == "speed-step":
+        return (f"Running at {p.v_from:g} m/s; logging from the photocell at the trigger point; the set point "
+                f"steps to {case.speed_nominal:g} m/s {p.step_time:g} s later ({n_samples} samples).")
+    if p.name == "stop":
+        return (f"Logging from the photocell at the trigger point; the set point drops to 0 {p.step_time:g} s "
+                f"later (a stop under drive braking; {n_samples} samples).")
+    return ("Logging from the photocell at the trigger point "
+            + ("for one lap." if full_lap else f"for {n_samples} samples (shortened run, not a full lap)."))
 
 
 def truth_for(case: Case, acq: dict, sensor: SensorModel, gen: dict, fmu_sha: str) -> dict:
@@ -397,6 +454,7 @@ def truth_for(case: Case, acq: dict, sensor: SensorModel, gen: dict, fmu_sha: st
         "effects": case.effects,
         "artefacts": {k: {**v, "applied": acq.get("artefacts", {}).get(k)} for k, v in case.artefacts.items()},
         "settle_time": SETTLE_TIME,
+        "protocol": case.protocol.to_meta(),
         "trigger_time_sim": acq["trigger_time"],
         "stop_time_sim": acq["stop_time"],
         "n_samples": acq["n_samples"],
@@ -439,32 +497,86 @@ def simulate_case(case: Case, sim, sensor: SensorModel, lap_seconds: Optional[fl
     """Run the FMU for a case and pass the record through the sensor model.
     Returns (samples, acquisition info, record)."""
     outputs = CHANNELS + [S_CHANNEL, "chain.v_mean"]
-    rec = sim.simulate(case.stop_time, step=sensor.internal_step, params=case.fmu_params,
-                       outputs=outputs, tolerance=tolerance)
+    proto = case.protocol
+    speed = proto.schedule(case.truth["v_s"], case.speed_nominal)
+    if proto.transient and tolerance is None:
+        tolerance = TRANSIENT_TOLERANCE
+    if proto.from_rest:
+        rec = sim.simulate(case.stop_time, step=sensor.internal_step, params=case.fmu_params, outputs=outputs,
+                           tolerance=tolerance, inputs={"drive.v_ref": speed})
+        rec = _with_standstill(rec, REST_LEAD, sensor.internal_step)
+        arm, trigger = 0.0, 0.0
+    elif proto.transient:
+        rec = _simulate_trigger_schedule(sim, case, sensor.internal_step, outputs, tolerance, speed)
+        arm, trigger = proto.run_in, None
+    else:
+        rec = sim.simulate(case.stop_time, step=sensor.internal_step, params=case.fmu_params,
+                           outputs=outputs, tolerance=tolerance)
+        arm, trigger = SETTLE_TIME, None
     arts = {}
     if case.artefacts:  # outside the catalogue: in the sensor stage, before the anti-alias filter
-        rec, arts = E.apply_artefacts(rec, case.artefacts, case.track_length, arm_time=SETTLE_TIME)
+        rec, arts = E.apply_artefacts(rec, case.artefacts, case.track_length, arm_time=arm)
     rng = np.random.default_rng([case.seed, case.number, 1])
-    n = None if lap_seconds is None else int(round(lap_seconds * sensor.sample_rate))
-    samples, acq = sensor.acquire(rec, case.truth["s_M"], case.track_length, rng, arm_time=SETTLE_TIME,
-                                  n_samples=n)
+    n = None if lap_seconds is None and not proto.transient else int(round(
+        (TRANSIENT_RECORD if lap_seconds is None else lap_seconds) * sensor.sample_rate))
+    samples, acq = sensor.acquire(rec, case.truth["s_M"], case.track_length, rng, arm_time=arm,
+                                  n_samples=n, trigger_time=trigger)
     for info in arts.values():
         info["centres_since_trigger_s"] = [tc - acq["trigger_time"] for tc in info["centres_sim_s"]]
     acq["artefacts"] = arts
+    if proto.transient:   # the whole record the protocol defines ('full_lap': complete, not shortened)
+        acq["full_lap"] = lap_seconds is None
     return samples, acq, rec
+
+
+def _with_standstill(rec, lead: float, h: float):
+    """The record with `lead` s of standstill before t = 0 (the values at t = 0):
+    what the logger's filter and wheel counters saw before the start command."""
+    import pandas as pd
+    k = int(round(lead / h))
+    head = pd.DataFrame(np.repeat(rec.iloc[:1].to_numpy(), k, axis=0), columns=rec.columns)
+    head["time"] = -h * np.arange(k, 0, -1)
+    return pd.concat([head, rec], ignore_index=True)
+
+
+def _simulate_trigger_schedule(sim, case: Case, h: float, outputs: list, tolerance, speed):
+    """The record of a speed step or a stop: the set point follows `speed` from
+    the photocell's trigger (the first forward crossing of s_M after the run-in,
+    the rule of sensor.trigger_times) on, so the crossing is found as the run goes."""
+    import pandas as pd
+
+    from .triggered import crossing_fraction
+    s_M, L, arm = case.truth["s_M"] % case.track_length, case.track_length, case.protocol.run_in
+    v_before = float(case.fmu_params["drive.v_ref"])
+    t_on = None
+    inputs = {"drive.v_ref": lambda t: v_before if t_on is None else speed(t - t_on)}
+    j = outputs.index(S_CHANNEL)
+    rows, times = [], []
+    for t, val in sim.stream(h, outputs, case.fmu_params, tolerance, inputs=inputs):
+        if t_on is None and times and t > arm:
+            frac = crossing_fraction(rows[-1][j], float(val[j]), s_M, L)
+            if frac is not None and times[-1] + frac * (t - times[-1]) >= arm:
+                t_on = times[-1] + frac * (t - times[-1])
+        rows.append(val.copy())
+        times.append(t)
+        if t >= case.stop_time:
+            break
+    df = pd.DataFrame(np.asarray(rows), columns=outputs)
+    df.insert(0, "time", np.asarray(times))
+    return df
 
 
 def run_measurement(set_name: str, number: int, out: Union[str, Path], sim, seed: int = DEFAULT_SEED,
                     lap_seconds: Optional[float] = None, sensor: Optional[SensorModel] = None,
                     fmu_sha: str = "", overwrite: bool = False, extra_params: Optional[Mapping] = None,
                     effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-                    artefacts: Sequence[str] = ()) -> dict:
+                    artefacts: Sequence[str] = (), protocol: str = "steady") -> dict:
     """Simulate one measurement and write DIR/mNN and DIR/answers/mNN/truth.json."""
     out = Path(out)
     sensor = sensor or SensorModel()
     t0, c0 = time.perf_counter(), time.process_time()
     case = make_case(set_name, number, seed, answers_dir(out), lap_seconds, extra_params, effects, effect_seed,
-                     artefacts)
+                     artefacts, protocol)
     samples, acq, _ = simulate_case(case, sim, sensor, lap_seconds)
     t_sim_wall, t_sim_cpu = time.perf_counter() - t0, time.process_time() - c0
     meta = meta_for(case, sensor, acq["n_samples"], acq["full_lap"])
@@ -499,20 +611,21 @@ def _init_worker(fmu: str) -> None:
     _WORKER["sim"] = ChainSimulator(Path(fmu), instance_name=f"rig{os.getpid()}")
 
 
-def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), None, ())):
+def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), None, (), "steady")):
     try:
         return run_measurement(set_name, number, out, _WORKER["sim"], seed, lap_seconds, fmu_sha=fmu_sha,
-                               overwrite=overwrite, effects=fx[0], effect_seed=fx[1], artefacts=fx[2])
+                               overwrite=overwrite, effects=fx[0], effect_seed=fx[1], artefacts=fx[2],
+                               protocol=fx[3])
     except Exception as exc:  # one failed measurement must not stop the set
         return {"number": number, "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
 
 
 def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
-              fx: tuple = ((), None, ())) -> Optional[str]:
+              fx: tuple = ((), None, (), "steady")) -> Optional[str]:
     """None if measurement `number` is not in `out`; "" if it is there and is what
     this run would make (same set, seed, FMU, parameters, undeclared effects and
-    artefacts, full lap); otherwise the reason why it differs. `fx`: (effects,
+    artefacts, protocol, full lap); otherwise the reason why it differs. `fx`: (effects,
     effect_seed, artefacts) of this run."""
     folder, truth = out / folder_name(number), answers_dir(out) / folder_name(number) / "truth.json"
     if not (folder / M.META_FILE).is_file() or not truth.is_file():
@@ -527,7 +640,10 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
         return "it is a shortened run (--lap-seconds)"
     if t.get("fmu_sha256") != sha:
         return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
-    case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2])
+    case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2], protocol=fx[3])
+    had_protocol = t.get("protocol") or Protocol("steady", run_in=SETTLE_TIME).to_meta()
+    if had_protocol != case.protocol.to_meta():
+        return f"it was measured with protocol {had_protocol.get('name')}, not {case.protocol.name}"
     had = (sorted(t.get("effects") or {}), sorted(t.get("artefacts") or {}))
     if had != (sorted(case.effects), sorted(case.artefacts)):
         named = lambda e, a: ", ".join(e + a) or "none"  # noqa: E731
@@ -550,8 +666,9 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
                  seed: int = DEFAULT_SEED, workers: Optional[int] = None, fmu: Optional[Union[str, Path]] = None,
                  lap_seconds: Optional[float] = None, overwrite: bool = False, progress: bool = True,
                  log=print, effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-                 artefacts: Sequence[str] = ()) -> list:
-    """Generate measurements of a set into `out`, in parallel.
+                 artefacts: Sequence[str] = (), protocol: str = "steady") -> list:
+    """Generate measurements of a set into `out`, in parallel, measured with
+    `protocol` (rig_protocol: steady, start-up, speed-step, stop).
 
     Measurements already in `out` that this run would make identically (same
     set, seed, FMU and parameters, full lap) are kept, so an interrupted run
@@ -570,9 +687,10 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
     from .runner import fmu_path
     if set_name not in SETS:
         raise ValueError(f"unknown set {set_name!r} (known: {', '.join(SETS)})")
+    rig_protocol(protocol, 1.0)   # an unknown name: refused before anything is written
     effects, artefacts = E.parse_effects(effects), E.parse_artefacts(artefacts)
     fx = (tuple(effects), None if not (effects or artefacts) else int(seed if effect_seed is None else effect_seed),
-          tuple(artefacts))
+          tuple(artefacts), protocol)
     numbers = list(ALL_NUMBERS) if numbers is None else sorted(set(int(n) for n in numbers))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -611,7 +729,8 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
                               f"the FMU in {fdir} that made them")
     todo = sorted(set(todo) | set(stale))
     # longest first: better balance over the workers
-    cases = {n: make_case(set_name, n, seed, None, lap_seconds, effects=fx[0], effect_seed=fx[1], artefacts=fx[2])
+    cases = {n: make_case(set_name, n, seed, None, lap_seconds, effects=fx[0], effect_seed=fx[1], artefacts=fx[2],
+                          protocol=fx[3])
              for n in todo}
     todo.sort(key=lambda n: -cases[n].cost)
     workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))

@@ -148,21 +148,28 @@ class SensorModel:
 
     def acquire(self, record: pd.DataFrame, s_M: float, track_length: float,
                 rng: np.random.Generator, arm_time: float = 0.0, offsets: Optional[Mapping] = None,
-                n_samples: Optional[int] = None, noise: bool = True):
+                n_samples: Optional[int] = None, noise: bool = True, trigger_time: Optional[float] = None):
         """The logger's samples from an FMU record.
 
         `record`: a DataFrame with 'time' on a uniform grid at `internal_rate`
         (as `ChainSimulator.simulate(step=1/internal_rate)` gives it), the 11
         channels and 'transducer.s'. Returns (samples, info): samples with
         'time' (0 at the trigger) and the 11 channels; info with the trigger and
-        stop times in record time, the offsets and the wheel pulse phases."""
+        stop times in record time, the offsets and the wheel pulse phases.
+        `trigger_time`: logging starts then (a start command, not the
+        photocell; n_samples must be given)."""
         t = record["time"].to_numpy(dtype=float)
         h = _uniform_step(t, self.internal_step)
         missing = [c for c in CHANNELS + [S_CHANNEL] if c not in record.columns]
         if missing:
             raise SensorError(f"the record lacks {', '.join(missing)}")
-        t_on, t_off = trigger_times(t, record[S_CHANNEL].to_numpy(dtype=float), s_M, track_length,
-                                    arm_time)
+        if trigger_time is not None:
+            if n_samples is None:
+                raise SensorError("a record started by a command (trigger_time) needs n_samples")
+            t_on, t_off = float(trigger_time), None
+        else:
+            t_on, t_off = trigger_times(t, record[S_CHANNEL].to_numpy(dtype=float), s_M, track_length,
+                                        arm_time)
         if n_samples is None:
             if t_off is None:
                 raise SensorError(f"the record (to t = {t[-1]:.3f} s) ends before the transducer cart "

@@ -68,7 +68,7 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
                        channels: Sequence[str] = FORCE_CHANNELS, max_wait: float | None = None,
                        tolerance: float | None = None, step: float | None = None,
                        history: float = 0.0, sample_rate: Optional[float] = None,
-                       inputs: Optional[Mapping[str, Callable[[float], float]]] = None) -> np.ndarray:
+                       after_trigger: Optional[Callable[[float], float]] = None) -> np.ndarray:
     """Outputs `channels` at `sample_times` (s after the trigger crossing) as an
     array (len(sample_times), len(channels)).
 
@@ -77,23 +77,27 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
     is `step`, by default half the sample spacing 1 / `sample_rate` (by
     default read off sample_times, see sample_rate_of); `history` s before the
     crossing are kept too, so that sample times down to -history can be asked
-    for. `inputs`: FMU inputs following a schedule (ChainSimulator.stream).
+    for. `after_trigger`: the speed set point as a function of the time since
+    the trigger (a speed step, a stop); params' drive.v_ref holds until then.
     Raises SimulationError if the run fails or the cart never reaches s_m
     within `max_wait` s after arming."""
     sample_times = np.asarray(sample_times, float)
     rate = float(sample_rate) if sample_rate is not None else sample_rate_of(sample_times)
     h = 0.5 / rate if step is None else float(step)
     duration = float(sample_times[-1]) + 2 * h
+    v_before = float(params.get("drive.v_ref", 2.0))
+    t_cross = None
+    inputs = None if after_trigger is None else {
+        "drive.v_ref": lambda t: v_before if t_cross is None else after_trigger(t - t_cross)}
     stream = sim.stream(h, [S_CHANNEL, *channels], params, tolerance, inputs=inputs)
     length = float(sim.get("track.length"))
-    v = max(abs(float(params.get("drive.v_ref", 2.0))), 0.1)
+    v = max(abs(v_before), 0.1)
     if max_wait is None:
         max_wait = 1.5 * length / v + 1.0
     t_arm = float(settle)
     keep = int(np.ceil(history / h)) + 2      # rows before the crossing: history and the cubic's support
     past: deque = deque(maxlen=keep)
-    t_prev = s_prev = None
-    t0 = t_cross = None
+    t_prev = s_prev = t0 = None
     rows: list = []
     for t, val in stream:
         s = float(val[0])
@@ -120,3 +124,30 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
     if not np.all(np.isfinite(data)):
         raise SimulationError("the simulated outputs are not finite")
     return interp_cubic(t0 - t_cross, h, data, sample_times)
+
+
+def simulate_from_rest(sim: ChainSimulator, params: Mapping[str, object], sample_times: np.ndarray,
+                       channels: Sequence[str] = FORCE_CHANNELS, tolerance: float | None = None,
+                       sample_rate: Optional[float] = None, history: float = 0.0,
+                       speed: Optional[Callable[[float], float]] = None) -> np.ndarray:
+    """Outputs `channels` at `sample_times` (s after the start command) of a
+    chain that starts at rest at t = 0 (params start it at rest: chain.v_init
+    0 and usually chain.relax_time > 0); `speed` is the set point as a
+    function of time. Before the start the chain stands still, so sample
+    times down to -history take the values at t = 0. The grid is k * h, h
+    half the sample spacing, as in simulate_triggered."""
+    sample_times = np.asarray(sample_times, float)
+    rate = float(sample_rate) if sample_rate is not None else sample_rate_of(sample_times)
+    h = 0.5 / rate
+    t_end = float(sample_times[-1]) + 2 * h
+    inputs = None if speed is None else {"drive.v_ref": speed}
+    rows = []
+    for t, val in sim.stream(h, list(channels), params, tolerance, inputs=inputs):
+        rows.append(val.copy())
+        if t >= t_end:
+            break
+    lead = int(np.ceil(history / h)) + 2          # the standstill before the start, for the cubic's support
+    data = np.concatenate([np.repeat(rows[:1], lead, axis=0), np.asarray(rows)])
+    if not np.all(np.isfinite(data)):
+        raise SimulationError("the simulated outputs are not finite")
+    return interp_cubic(-lead * h, h, data, sample_times)
