@@ -9,7 +9,9 @@ a NUL byte.
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Union
@@ -239,14 +241,36 @@ def parse_layout(text: Union[str, bytes], source: Optional[str] = None) -> Layou
     return spec
 
 
+def _read_regular(path: Path) -> bytes:
+    """At most MAX_BYTES + 1 bytes of a regular file. As the C reader: opened
+    without blocking, then checked on the open file, so that a FIFO, a device or
+    a directory is refused instead of read (a FIFO would block for ever)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except OSError as exc:
+        raise LayoutError(f"cannot open the layout file ({exc.strerror or exc})", None, str(path)) from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise LayoutError("is a directory, not a layout file", None, str(path))
+        if not stat.S_ISREG(mode):
+            raise LayoutError("is not a regular file (a FIFO, device or socket is not read)", None, str(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb") as f:
+            fd = -1
+            return f.read(MAX_BYTES + 1)
+    except OSError as exc:
+        raise LayoutError(f"read error ({exc.strerror or exc})", None, str(path)) from None
+    finally:
+        if fd >= 0:
+            os.close(fd)
+
+
 def read_layout(path: Union[str, Path]) -> LayoutSpec:
     """Parse a layout file. Without a `name` line the name is the file's stem."""
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read(MAX_BYTES + 1)
-    except OSError as exc:
-        raise LayoutError(f"cannot open the layout file ({exc.strerror or exc})", None, str(path)) from None
+    data = _read_regular(path)
     spec = parse_layout(data, str(path))
     if not spec.name:
         stem = path.name

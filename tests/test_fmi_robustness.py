@@ -510,6 +510,50 @@ def test_corrupted_serialized_states_are_refused_or_harmless():
         assert "another build" in s.last_error()
 
 
+WORD_VALUES = (float("nan"), float("inf"), -float("inf"), 0.0, -1.0, 1e300)
+
+
+def test_every_word_of_a_serialized_state():
+    """Each 8-byte word of a serialized state (header, parameters, the chain's
+    solver fields, states, contact memory) set in turn to NaN, +-inf, 0, -1 and
+    1e300 (issue 20): refused with a message at deserialize or set, or, if
+    still a valid state, stepped 1 ms to the right time or discarded with a
+    message; never a hang, never fmi2OK at a wrong time."""
+    import struct
+    import time
+    with initialised() as s:
+        s.fmu.doStep(0.0, STEP)
+        good = s.fmu.getFMUstate()
+        blob = bytes(s.fmu.serializeFMUstate(good))
+        fmi = s.fmu._functions
+        slowest = 0.0
+        for w in range(len(blob) // 8):
+            for v in WORD_VALUES:
+                bad = blob[:8 * w] + struct.pack("=d", v) + blob[8 * w + 8:]
+                if bad == blob:
+                    continue
+                buf = ctypes.create_string_buffer(bad, len(bad))
+                state = c_void_p()
+                n = len(s.messages)
+                status = fmi["fmi2DeSerializeFMUstate"](s.fmu.component, buf, len(bad), byref(state))
+                if status == OK:
+                    status = fmi["fmi2SetFMUstate"](s.fmu.component, state)
+                    if status == OK:
+                        t = s.fmu.getRealStatus(2)
+                        assert t == STEP, (w, v, t)  # the time of the state taken
+                        start = time.perf_counter()
+                        status = fmi["fmi2DoStep"](s.fmu.component, t, 1e-3, 1)
+                        slowest = max(slowest, time.perf_counter() - start)
+                        if status == OK:
+                            assert s.fmu.getRealStatus(2) == t + 1e-3, (w, v)
+                    s.fmu.freeFMUstate(state)
+                    s.fmu.setFMUstate(good)
+                record("serialized FMU state, every 8-byte word set to NaN, +-inf, 0, -1, 1e300", s, status, n,
+                       (OK, ERROR, DISCARD))
+        assert slowest < 30.0
+        s.fmu.freeFMUstate(good)
+
+
 # --- random layout files through the FMU --------------------------------------------------------
 
 LINE = st.one_of(
