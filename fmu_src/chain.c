@@ -135,12 +135,8 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
         goto fail_spec;
     }
     if (spec.cart_mass > 0) m->type.mass = spec.cart_mass;
-    m->n_carts = spec.n_carts > 0 ? spec.n_carts : (int)floor(m->track.length / 1.25 + 0.5);
+    if (layout_check_chain(&spec, m->track.length, &m->n_carts, err, errlen)) goto fail_spec;
     layout_spec_free(&spec, a);
-    if (m->n_carts < 3 || m->n_carts > 100000) {
-        snprintf(err, errlen, "a chain of %d carts is not supported (3 to 100000)", m->n_carts);
-        goto fail;
-    }
     if (p->chain_transducer >= m->n_carts) {
         snprintf(err, errlen, "chain.transducer = %d is invalid: the chain has %d carts (0..%d)",
                  p->chain_transducer, m->n_carts, m->n_carts - 1);

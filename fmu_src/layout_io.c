@@ -33,16 +33,7 @@
 #endif
 #endif
 
-#define LAYOUT_MAX_BYTES 1048576
-#define LAYOUT_MAX_ELEMENTS 10000
 #define LAYOUT_MAX_TOKENS 8
-#define LAYOUT_MAX_NUMBER_CHARS 64
-#define LAYOUT_MAX_SIZE_M 10000.0
-#define LAYOUT_MAX_ANGLE_DEG 3600.0
-#define LAYOUT_MAX_MOTORS 10000
-#define LAYOUT_MIN_CARTS 2
-#define LAYOUT_MAX_CARTS 100000
-#define LAYOUT_MAX_MASS 10000.0
 #define DEG (3.14159265358979323846 / 180.0)
 
 typedef struct {
@@ -275,9 +266,9 @@ static int parse_header(int key, const Tok *tk, int nt, int line, LayoutSpec *ou
     case H_START: {
         static const char *const what[3] = {"start x", "start y", "start z"};
         for (int i = 0; i < 3; i++)
-            if (get_number(&tk[1 + i], line, what[i], 0, 0, &out->start[i], err, errlen)) return 1;
+            if (get_number(&tk[1 + i], line, what[i], 0, LAYOUT_MAX_SIZE_M, &out->start[i], err, errlen)) return 1;
         double h;
-        if (get_number(&tk[4], line, "start heading", 0, 0, &h, err, errlen)) return 1;
+        if (get_number(&tk[4], line, "start heading", 0, LAYOUT_MAX_ANGLE_DEG, &h, err, errlen)) return 1;
         out->heading = h * DEG;
         return 0;
     }
@@ -475,6 +466,39 @@ int layout_read_file(const char *path, LayoutSpec *out, const LSSAlloc *a, char 
         memcpy(out->name, base, k);
         out->name[k] = 0;
     }
+    return 0;
+}
+
+int layout_check_chain(const LayoutSpec *spec, double length, int *n_carts, char *err, size_t errlen) {
+    double n = spec->n_carts > 0 ? (double)spec->n_carts : floor(length / LAYOUT_NOMINAL_PITCH + 0.5);
+    char derived[96] = "";
+    if (spec->n_carts <= 0)
+        snprintf(derived, sizeof derived, " (the %.6g m track at one cart per %g m)", length, LAYOUT_NOMINAL_PITCH);
+    if (!(n >= LAYOUT_MIN_CARTS && n <= LAYOUT_MAX_CARTS)) {
+        if (err && errlen)
+            snprintf(err, errlen, "a chain of %.0f carts is not supported (%d to %d)%s", isfinite(n) ? n : -1.0,
+                     LAYOUT_MIN_CARTS, LAYOUT_MAX_CARTS, derived);
+        return 1;
+    }
+    double pitch = length / n;
+    if (!(pitch >= LAYOUT_MIN_PITCH && pitch <= LAYOUT_MAX_PITCH)) {
+        if (err && errlen)
+            snprintf(err, errlen, "%.0f carts on the %.6g m track make a pitch of %.6g m; it must lie in "
+                     "[%g, %g] m", n, length, pitch, LAYOUT_MIN_PITCH, LAYOUT_MAX_PITCH);
+        return 1;
+    }
+    for (int i = 0; i < spec->n_el; i++) {
+        const ElementSpec *e = &spec->el[i];
+        if (e->kind != EL_STRAIGHT && !(e->radius >= pitch)) {
+            if (err && errlen)
+                snprintf(err, errlen, "line %d: %s radius %.6g m is smaller than the cart pitch %.6g m "
+                         "(%.0f carts on %.6g m): the chain cannot follow it", e->line,
+                         e->kind == EL_VCURVE ? "vcurve" : e->kind == EL_SPIRAL ? "spiral" : "curve", e->radius,
+                         pitch, n, length);
+            return 1;
+        }
+    }
+    if (n_carts) *n_carts = (int)n;
     return 0;
 }
 

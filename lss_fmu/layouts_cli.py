@@ -10,7 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .layouts import (TABLE2, LayoutError, builtin_layouts, load_track, summary, table2_mismatches)
+from .layouts import (TABLE2, LayoutError, builtin_layouts, check_layout, load_track, summary, table2_mismatches)
 
 
 def _table(out) -> int:
@@ -39,7 +39,7 @@ def _check(targets: list, out, err) -> int:
     rc = 0
     for target in targets:
         try:
-            row = summary(load_track(target))
+            row = summary(check_layout(target))
         except LayoutError as exc:
             print(f"lss layouts check: {' '.join(str(exc).split())}", file=err)
             rc = 1
