@@ -356,6 +356,7 @@ def test_checker_and_fmu_agree_on_the_corpus_and_the_rule_cases(tmp_path):
             checker_ok = False
         assert checker_ok == fmu_ok, (path.name, fmu_msg)
         verdicts[(c_ok, fmu_ok)] += 1
+    print(f"\nlayout verdicts (rules ok, FMU builds): {dict(verdicts)} of {len(paths)} files")
     assert verdicts[(True, True)] >= 15 and verdicts[(False, False)] >= 300 and verdicts[(True, False)] >= 1
     for name in ("two carts", "0.1 mm full circle", "loop of tiny curves", "start 1e300", "radius below the pitch"):
         assert not rules_python(RULE_CASES[name].encode())[0], name
