@@ -1,4 +1,5 @@
 /* Building, checking, snapshotting and freeing the chain. */
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -134,12 +135,8 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
         goto fail_spec;
     }
     if (spec.cart_mass > 0) m->type.mass = spec.cart_mass;
-    m->n_carts = spec.n_carts > 0 ? spec.n_carts : (int)floor(m->track.length / 1.25 + 0.5);
+    if (layout_check_chain(&spec, m->track.length, &m->n_carts, err, errlen)) goto fail_spec;
     layout_spec_free(&spec, a);
-    if (m->n_carts < 3 || m->n_carts > 100000) {
-        snprintf(err, errlen, "a chain of %d carts is not supported (3 to 100000)", m->n_carts);
-        goto fail;
-    }
     if (p->chain_transducer >= m->n_carts) {
         snprintf(err, errlen, "chain.transducer = %d is invalid: the chain has %d carts (0..%d)",
                  p->chain_transducer, m->n_carts, m->n_carts - 1);
@@ -264,6 +261,68 @@ void chain_state_save(const Chain *c, double *buf) {
     memcpy(p, st->ddelta_prev, sizeof(double) * (size_t)ns); p += ns;
     memcpy(p, c->ode.k[0], sizeof(double) * (size_t)c->m.n_y);
 }
+
+/* Counters are stored as doubles: whole numbers in [0, 2^53]. */
+static int is_count(double x) { return x >= 0 && x <= 9007199254740992.0 && x == floor(x); }
+
+#define BAD(...) do { snprintf(why, len, __VA_ARGS__); return 1; } while (0)
+
+/* Every field of a snapshot of n doubles that may come from bytes handed in
+ * by the master (docs/robustness.md, "FMU states"). built: the parameters the
+ * chain is built with; t_chain: the chain time the FMU header implies
+ * (time - startTime); exact: the chain must be at t_chain (within rounding),
+ * otherwise at or after it (a state taken after a discarded step); c: the
+ * chain the snapshot is for, or NULL before it exists (the checks that need
+ * the track are then left to the second call). 0, or 1 with the reason. */
+int chain_state_check(const double *buf, size_t n, const LSSParams *built, double t_chain, int exact,
+                      const Chain *c, char *why, size_t len) {
+    if (n < SNAP_HEADER + 24 || (n - SNAP_HEADER - 12) % 45 != 0) BAD("chain snapshot of %zu values", n);
+    size_t N = (n - SNAP_HEADER - 12) / 45, ny = CART_NY * N + N_GLOBAL, ns = N_SLOT * N;
+    if (N < 3 || buf[0] != (double)ny || (c && (size_t)c->m.n_y != ny))
+        BAD("chain snapshot: state size %.17g does not match its %zu values", buf[0], n);
+    double t = buf[1], h = buf[2], err_prev = buf[3], h_last = buf[10];
+    double tol_t = 1e-9 * (fabs(t_chain) + 1.0);
+    if (!isfinite(t) || !(t >= 0) || !isfinite(t_chain))
+        BAD("solver time t = %.17g s is not a finite time >= 0", t);
+    if (exact ? !(fabs(t - t_chain) <= tol_t) : !(t >= t_chain - tol_t))
+        BAD("solver time t = %.17g s does not match the FMU's time (%.17g s after the start)", t, t_chain);
+    double h_top = 5.0 * fmax(built->solver_h_max, 1e-4) * (1.0 + 1e-9);
+    if (!isfinite(h) || !(h > 0) || !(h <= h_top))
+        BAD("solver step size h = %.17g s is not in (0, %g] s", h, h_top);
+    if (!(h_last >= 0 && h_last <= h_top)) BAD("last step size %.17g s is not in [0, %g] s", h_last, h_top);
+    if (!(err_prev >= 1e-4 && err_prev <= 1.0)) BAD("solver error memory %.17g is not in [1e-4, 1]", err_prev);
+    if (buf[4] != built->drive_v_ref || buf[5] != built->drive_Kp || buf[6] != built->drive_Ki)
+        BAD("inputs in the chain snapshot (v_ref %.17g, Kp %.17g, Ki %.17g) differ from the state's parameters",
+            buf[4], buf[5], buf[6]);
+    if (!is_count(buf[7]) || !is_count(buf[8]) || !is_count(buf[9]))
+        BAD("solver counters %.17g, %.17g, %.17g are not whole numbers in [0, 2^53]", buf[7], buf[8], buf[9]);
+    if (buf[11] != 0 && buf[11] != 1) BAD("solver flag %.17g is neither 0 nor 1", buf[11]);
+    const double *y = buf + SNAP_HEADER, *s_hint = y + ny, *v_onset = s_hint + N, *rest = v_onset + ns;
+    for (size_t i = 0; i < ny; i++)
+        if (!isfinite(y[i])) BAD("state value %zu (cart %zu) is %g", i, i / CART_NY, y[i]);
+    for (size_t i = 0; i < N; i++) {
+        const double *q = y + CART_NY * i + 3;
+        double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        if (!(fabs(nq - 1.0) <= 1e-6)) BAD("cart %zu: orientation quaternion of norm %.17g (not 1)", i, nq);
+        double L = c ? c->m.track.length : INFINITY;
+        if (!(s_hint[i] >= 0 && s_hint[i] <= L)) BAD("cart %zu: track position %.17g m is not on the track", i, s_hint[i]);
+        if (c) {  /* the cart where its track position says: its CG within 1 m of that centreline point */
+            TrackFrame f;
+            track_frame(&c->m.track, s_hint[i], NULL, &f);
+            const double *r = y + CART_NY * i;
+            double d = sqrt((r[0] - f.c[0]) * (r[0] - f.c[0]) + (r[1] - f.c[1]) * (r[1] - f.c[1]) +
+                            (r[2] - f.c[2]) * (r[2] - f.c[2]));
+            if (!(d <= 1.0)) BAD("cart %zu is %.3g m away from the track at its track position %.6g m", i, d, s_hint[i]);
+        }
+    }
+    for (size_t k = 0; k < ns; k++)
+        if (!isfinite(v_onset[k]) || !(v_onset[k] == 0 || v_onset[k] >= built->contact_v_min))
+            BAD("contact %zu: onset velocity %.17g m/s is neither 0 nor >= contact.v_min", k, v_onset[k]);
+    for (size_t k = 0; k < 2 * ns + ny; k++)  /* delta_prev, ddelta_prev and the FSAL derivative */
+        if (!isfinite(rest[k])) BAD("contact memory or derivative value %zu is %g", k, rest[k]);
+    return 0;
+}
+#undef BAD
 
 void chain_state_load(Chain *c, const double *buf) {
     ChainState *st = &c->st;

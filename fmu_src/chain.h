@@ -177,6 +177,8 @@ int chain_put_state(Chain *c, double t, double *y, int accept);
 size_t chain_state_size(const Chain *c);
 void chain_state_save(const Chain *c, double *buf);
 void chain_state_load(Chain *c, const double *buf);
+int chain_state_check(const double *buf, size_t n, const LSSParams *built, double t_chain, int exact,
+                      const Chain *c, char *why, size_t len);
 
 /* Helpers shared by the chain's files. */
 void cart_geometry_init(CartGeometry *g, const CartType *t, double pitch, double guide_gap,

@@ -114,6 +114,17 @@ static double trial(Dopri *d, const double *y, double t, double h) {
 int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err, size_t errlen) {
     int n = d->n;
     double span = fabs(t_end) + 1.0;
+    /* a state that cannot advance is refused, not looped on (NaN fails every comparison) */
+    if (!isfinite(st->t) || !isfinite(t_end) || !isfinite(st->h) || !(st->h > 0) ||
+        !(st->err_prev > 0 && st->err_prev <= 1.0)) {
+        snprintf(err, errlen, "invalid solver state (t = %g s, h = %g s, error memory %g, end time %g s)",
+                 st->t, st->h, st->err_prev, t_end);
+        return 1;
+    }
+    /* accepted and rejected steps of this call: at most DOPRI_MAX_STEPS beyond
+       twice the steps h_max alone forces on the span */
+    double forced = (t_end - st->t) / d->h_max;
+    long trials = 0, max_trials = DOPRI_MAX_STEPS + (forced > 0 ? (forced < 1e15 ? 2 * (long)ceil(forced) : (long)2e15) : 0);
     while (st->t < t_end - 1e-13 * span) {
         if (!st->fsal_valid) {
             d->rhs(d->ctx, st->t, y, d->k[0]);
@@ -128,6 +139,16 @@ int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err
             last = 1;
         }
         for (;;) {
+            if (++trials > max_trials) {
+                snprintf(err, errlen, "more than %ld internal steps (the limit for this step) at t = %.9g s, "
+                         "%.3g s short of the end time; the last step size was %g s",
+                         max_trials, st->t, t_end - st->t, h);
+                return 1;
+            }
+            if (!last && !(st->t + h > st->t)) {
+                snprintf(err, errlen, "step size %g s is below the resolution of the time t = %.17g s", h, st->t);
+                return 1;
+            }
             double e = trial(d, y, st->t, h);
             st->n_rhs += 6;
             if (!isfinite(e)) {

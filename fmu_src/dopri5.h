@@ -27,9 +27,15 @@ typedef struct {
 
 void dopri_reset(DopriState *s, double t0, double h0);
 
+/* Steps (accepted and rejected) one call of dopri_integrate may take beyond
+ * twice the number h_max alone forces on the span, (t_end - t) / h_max:
+ * legal runs need far fewer (docs/robustness.md, "Step limit"). */
+#define DOPRI_MAX_STEPS 100000
+
 /* Integrates y from s->t to t_end. 0: ok; 1: non-finite state or collapsed
- * step (err filled). k[0] and the last right-hand side evaluation are at
- * (t_end, y) on return. */
+ * step, a solver state that cannot advance (t or h not finite, h <= 0) or
+ * more than DOPRI_MAX_STEPS steps (err filled). k[0] and the last
+ * right-hand side evaluation are at (t_end, y) on return. */
 int dopri_integrate(Dopri *d, DopriState *s, double *y, double t_end, char *err, size_t errlen);
 
 #endif

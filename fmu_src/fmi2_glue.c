@@ -242,13 +242,31 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     in->stop_time = stopTimeDefined ? stopTime : 0.0;
     in->start_time = in->time = startTime;
     in->chain_stale = 1;
+    in->setup_done = 1;
     return status;
 }
 
+/* FMI 2.0 has fmi2SetupExperiment called before fmi2EnterInitializationMode.
+ * Without it the call is accepted with the defaults a master would most
+ * likely mean (startTime 0, no stop time, solver.tolerance) and fmi2Warning
+ * with a message (docs/robustness.md): refusing would break masters that
+ * skip it, guessing silently would hide their mistake. */
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     CHECK(c, "fmi2EnterInitializationMode", ST_INSTANTIATED);
+    fmi2Status status = fmi2OK;
+    if (!in->setup_done) {
+        in->tolerance_defined = in->stop_time_defined = 0;
+        in->stop_time = 0.0;
+        in->start_time = in->time = 0.0;
+        in->chain_stale = 1;
+        in->setup_done = 1;
+        lss_log(in, fmi2Warning, "logStatusWarning",
+                "fmi2EnterInitializationMode without fmi2SetupExperiment: using startTime = 0, no stopTime and "
+                "the tolerance solver.tolerance = %g", in->p.solver_tolerance);
+        status = fmi2Warning;
+    }
     in->state = ST_INIT;
-    return fmi2OK;
+    return status;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
@@ -276,6 +294,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
     in->stop_time = 0.0;
     in->start_time = in->time = 0.0;
     in->chain_stale = 1;
+    in->setup_done = 0;
     return fmi2OK;
 }
 
@@ -473,10 +492,24 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         return fmi2Error;
     }
     char err[512];
-    if (chain_step(in->chain, t + h - in->start_time, err, sizeof err) != 0) {
+    double t_end = t + h - in->start_time, t_tol = 1e-9 * (fabs(t_end) + 1.0);
+    if (!(fabs(in->chain->st.ode.t - (in->time - in->start_time)) <= t_tol + 1e-9 * fabs(h))) {
+        LOG_ERROR(in, "fmi2DoStep: the chain is at %.17g s but the FMU at %.17g s after the start (internal state "
+                  "inconsistent); call fmi2Reset or set a valid FMU state", in->chain->st.ode.t,
+                  in->time - in->start_time);
+        return fmi2Error;
+    }
+    if (chain_step(in->chain, t_end, err, sizeof err) != 0) {
         in->state = ST_STEP_FAILED;
         in->outputs_stale = 1;
         lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2DoStep from t = %g: %s", t, err);
+        return fmi2Discard;
+    }
+    if (!(fabs(in->chain->st.ode.t - t_end) <= t_tol)) {  /* cannot happen: the solver lands on t_end */
+        in->state = ST_STEP_FAILED;
+        in->outputs_stale = 1;
+        lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2DoStep from t = %g: the solver stopped at %.17g s, "
+                "not at %.17g s", t, in->chain->st.ode.t + in->start_time, t + h);
         return fmi2Discard;
     }
     in->time = t + h;

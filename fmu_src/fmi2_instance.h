@@ -30,6 +30,7 @@ typedef struct {
     int chain_stale;        /* parameters changed since the chain was built */
     int outputs_stale;
     double start_time, time;
+    int setup_done;         /* fmi2SetupExperiment called since fmi2Instantiate or fmi2Reset */
     int tolerance_defined;
     double tolerance;
     int stop_time_defined;

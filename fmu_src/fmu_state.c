@@ -4,6 +4,7 @@
  * (chain_state_save). A state handed in by the master is checked before it is
  * adopted; adopting it is all or nothing. */
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -67,6 +68,39 @@ static int params_terminated(const LSSParams *p) {
     return 1;
 }
 
+/* Do two parameter sets agree in every variable (the solver tolerance
+ * excepted when skip_tol)? Compared through the variable table: padding bytes
+ * are not part of a parameter set. */
+static int same_params(const LSSParams *a, const LSSParams *b, int skip_tol) {
+    for (int vr = 1; vr <= LSS_N_VARS; vr++) {
+        const LSSVarInfo *v = &LSS_VARS[vr];
+        if (!v->in_params || (skip_tol && v->offset == offsetof(LSSParams, solver_tolerance))) continue;
+        const char *x = (const char *)a + v->offset, *y = (const char *)b + v->offset;
+        if (v->type == LSS_STRING ? strcmp(x, y) != 0
+                                  : memcmp(x, y, v->type == LSS_REAL ? sizeof(double) : sizeof(int)) != 0)
+            return 0;
+    }
+    return 1;
+}
+
+/* The outputs a state carries: finite numbers, counters not negative. */
+static int outputs_sane(const LSSOutputs *o, char *why, size_t len) {
+    for (int vr = 1; vr <= LSS_N_VARS; vr++) {
+        const LSSVarInfo *v = &LSS_VARS[vr];
+        if (v->in_params) continue;
+        const char *slot = (const char *)o + v->offset;
+        if (v->type == LSS_REAL && !isfinite(*(const double *)slot)) {
+            snprintf(why, len, "corrupt FMU state: output %s = %g", v->name, *(const double *)slot);
+            return 0;
+        }
+        if (v->type == LSS_INTEGER && *(const int *)slot < 0) {
+            snprintf(why, len, "corrupt FMU state: output %s = %d", v->name, *(const int *)slot);
+            return 0;
+        }
+    }
+    return 1;
+}
+
 static int valid_state(int s) {
     return s == ST_INSTANTIATED || s == ST_INIT || s == ST_STEP_COMPLETE || s == ST_STEP_FAILED ||
            s == ST_TERMINATED || s == ST_ERROR;
@@ -107,6 +141,34 @@ static int check_header(const SnapHeader *h, char *why, size_t len) {
     }
     if (chain_check_params(&h->p, err, sizeof err) || (h->has_chain && chain_check_params(&h->built, err, sizeof err))) {
         snprintf(why, len, "FMU state with invalid parameters: %s", err);
+        return 1;
+    }
+    if (h->stop_time_defined && !(h->stop_time >= h->start_time)) {
+        snprintf(why, len, "corrupt FMU state: stopTime %.17g before startTime %.17g", h->stop_time, h->start_time);
+        return 1;
+    }
+    if (h->has_chain) {
+        if (!same_params(&h->p, &h->built, 1) ||
+            h->built.solver_tolerance != (h->tolerance_defined ? h->tolerance : h->p.solver_tolerance)) {
+            snprintf(why, len, "corrupt FMU state: the chain's parameters differ from the state's");
+            return 1;
+        }
+        if (h->has_out && !outputs_sane(&h->out, why, len)) return 1;
+    }
+    return 0;
+}
+
+/* The header and the chain's snapshot (data, h->n doubles, aligned) together;
+ * c: the chain the state will be loaded into, or NULL. 0, or 1 with why. */
+static int check_snapshot(const SnapHeader *h, const double *data, const Chain *c, char *why, size_t len) {
+    if (check_header(h, why, len)) return 1;
+    if (!h->has_chain) return 0;
+    /* Step Mode and Initialization Mode: the chain is at the FMU's time; after a
+       discarded step (and a Terminate that may follow) it may be past it */
+    int exact = !(h->state & (ST_STEP_FAILED | ST_TERMINATED | ST_ERROR));
+    char what[400];
+    if (chain_state_check(data, h->n, &h->built, h->time - h->start_time, exact, c, what, sizeof what)) {
+        snprintf(why, len, "corrupt FMU state: %s", what);
         return 1;
     }
     return 0;
@@ -162,7 +224,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
 /* All or nothing: on an error the instance is left as it was. */
 static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
     char why[600];
-    if (check_header(&s->h, why, sizeof why)) {
+    if (check_snapshot(&s->h, s->data, NULL, why, sizeof why)) {
         LOG_ERROR(in, "%s: %s", fn, why);
         return fmi2Error;
     }
@@ -186,6 +248,12 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
                 return fmi2Error;
             }
         }
+        /* the checks that need the chain (its track) */
+        if (check_snapshot(&s->h, s->data, fresh ? fresh : in->chain, why, sizeof why)) {
+            chain_free(fresh);
+            LOG_ERROR(in, "%s: %s", fn, why);
+            return fmi2Error;
+        }
     }
     /* from here on nothing fails */
     if (fresh) {
@@ -199,6 +267,7 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
     in->stop_time = s->h.stop_time;
     in->start_time = s->h.start_time;
     in->time = s->h.time;
+    in->setup_done = 1;  /* the state carries the experiment's times */
     in->outputs_stale = 1;
     if (s->h.has_chain) {
         chain_state_load(in->chain, s->data);
@@ -308,7 +377,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
         LOG_ERROR(in, "fmi2DeSerializeFMUstate: out of memory");
         return fmi2Error;
     }
-    memcpy(s, serializedState, size);
+    memcpy(s, serializedState, size);  /* aligned copy: the chain part is read as doubles */
+    if (check_snapshot(&s->h, s->data, NULL, why, sizeof why)) {
+        in->cb.freeMemory(s);
+        LOG_ERROR(in, "fmi2DeSerializeFMUstate: %s", why);
+        return fmi2Error;
+    }
     if (*FMUstate) {
         ((Snapshot *)*FMUstate)->h.magic = 0;
         in->cb.freeMemory(*FMUstate);

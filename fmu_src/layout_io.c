@@ -6,6 +6,9 @@
  * (space, tab, CR, VT, FF); a blank line is skipped; the first token is a
  * keyword. Numbers are decimal ([+-]digits[.digits][e[+-]digits]) and are
  * read independently of the C locale. */
+#if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
+#define _POSIX_C_SOURCE 200809L /* open, fstat, fcntl, fdopen under -std=c11 */
+#endif
 #include "layout_io.h"
 
 #include <locale.h>
@@ -14,17 +17,23 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#if defined(__unix__) || defined(__APPLE__)
+#include <fcntl.h>
+#include <unistd.h>
+#define LSS_POSIX_OPEN 1
+#endif
+#ifndef S_ISREG /* MSVC has only the mode bits */
+#ifdef S_IFMT
+#define S_ISREG(m) (((m) & S_IFMT) == S_IFREG)
+#define S_ISDIR(m) (((m) & S_IFMT) == S_IFDIR)
+#else
+#define S_ISREG(m) (((m) & _S_IFMT) == _S_IFREG)
+#define S_ISDIR(m) (((m) & _S_IFMT) == _S_IFDIR)
+#endif
+#endif
 
-#define LAYOUT_MAX_BYTES 1048576
-#define LAYOUT_MAX_ELEMENTS 10000
 #define LAYOUT_MAX_TOKENS 8
-#define LAYOUT_MAX_NUMBER_CHARS 64
-#define LAYOUT_MAX_SIZE_M 10000.0
-#define LAYOUT_MAX_ANGLE_DEG 3600.0
-#define LAYOUT_MAX_MOTORS 10000
-#define LAYOUT_MIN_CARTS 2
-#define LAYOUT_MAX_CARTS 100000
-#define LAYOUT_MAX_MASS 10000.0
 #define DEG (3.14159265358979323846 / 180.0)
 
 typedef struct {
@@ -257,9 +266,9 @@ static int parse_header(int key, const Tok *tk, int nt, int line, LayoutSpec *ou
     case H_START: {
         static const char *const what[3] = {"start x", "start y", "start z"};
         for (int i = 0; i < 3; i++)
-            if (get_number(&tk[1 + i], line, what[i], 0, 0, &out->start[i], err, errlen)) return 1;
+            if (get_number(&tk[1 + i], line, what[i], 0, LAYOUT_MAX_SIZE_M, &out->start[i], err, errlen)) return 1;
         double h;
-        if (get_number(&tk[4], line, "start heading", 0, 0, &h, err, errlen)) return 1;
+        if (get_number(&tk[4], line, "start heading", 0, LAYOUT_MAX_ANGLE_DEG, &h, err, errlen)) return 1;
         out->heading = h * DEG;
         return 0;
     }
@@ -365,16 +374,63 @@ int layout_parse(const char *text, size_t len, LayoutSpec *out, const LSSAlloc *
     return 0;
 }
 
+/* Opens path for reading only if it is a regular file: a FIFO, a device or a
+ * directory is refused without blocking (POSIX: opened with O_NONBLOCK, then
+ * fstat on the open file, so the check and the read see the same file). NULL
+ * with a message otherwise; *size is the size the file claims. */
+static FILE *open_regular(const char *path, size_t *size, char *err, size_t errlen) {
+    const char *why = NULL;
+#ifdef LSS_POSIX_OPEN
+    int fd = open(path, O_RDONLY | O_NONBLOCK);
+    if (fd < 0) {
+        if (err && errlen) snprintf(err, errlen, "%s: cannot open the layout file", path);
+        return NULL;
+    }
+    struct stat st;
+    if (fstat(fd, &st) != 0) why = "cannot read its file status";
+    else if (S_ISDIR(st.st_mode)) why = "is a directory, not a layout file";
+    else if (!S_ISREG(st.st_mode)) why = "is not a regular file (a FIFO, device or socket is not read)";
+    else {
+        int fl = fcntl(fd, F_GETFL);  /* a regular file: blocking reads as usual */
+        if (fl != -1) fcntl(fd, F_SETFL, fl & ~O_NONBLOCK);
+    }
+    FILE *f = why ? NULL : fdopen(fd, "rb");
+    if (!f) {
+        close(fd);
+        if (!why) why = "cannot open the layout file";
+        if (err && errlen) snprintf(err, errlen, "%s: %s", path, why);
+        return NULL;
+    }
+#else  /* elsewhere: the file's type and size by name, then fopen */
+    struct stat st;
+    FILE *f = NULL;
+    if (stat(path, &st) != 0) why = "cannot open the layout file";
+    else if (S_ISDIR(st.st_mode)) why = "is a directory, not a layout file";
+    else if (!S_ISREG(st.st_mode)) why = "is not a regular file";
+    else if (!(f = fopen(path, "rb"))) why = "cannot open the layout file";
+    if (why) {
+        if (err && errlen) snprintf(err, errlen, "%s: %s", path, why);
+        return NULL;
+    }
+#endif
+    *size = st.st_size > 0 ? (size_t)st.st_size : 0;
+    return f;
+}
+
 int layout_read_file(const char *path, LayoutSpec *out, const LSSAlloc *a, char *err, size_t errlen) {
     memset(out, 0, sizeof(*out));
     if (err && errlen) err[0] = 0;
-    FILE *f = path ? fopen(path, "rb") : NULL;
-    if (!f) {
-        if (err && errlen) snprintf(err, errlen, "%s: cannot open the layout file", path ? path : "(null)");
+    if (!path) {
+        if (err && errlen) snprintf(err, errlen, "(null): cannot open the layout file");
         return 1;
     }
-    /* read at most one byte past the limit: layout_parse reports the size */
-    size_t cap = LAYOUT_MAX_BYTES + 1;
+    size_t claimed = 0;
+    FILE *f = open_regular(path, &claimed, err, errlen);
+    if (!f) return 1;
+    /* one byte more than the file claims: a file that grew (or a /proc file of
+       size 0) is noticed; never more than one byte past the 1 MiB limit, which
+       layout_parse then reports with the line it reached */
+    size_t cap = (claimed > LAYOUT_MAX_BYTES ? LAYOUT_MAX_BYTES : claimed) + 1;
     char *buf = a->calloc(cap + 1, 1);
     if (!buf) {
         fclose(f);
@@ -384,9 +440,11 @@ int layout_read_file(const char *path, LayoutSpec *out, const LSSAlloc *a, char 
     size_t n = fread(buf, 1, cap, f);
     int bad = ferror(f);
     fclose(f);
-    if (bad) {
+    if (bad || (claimed <= LAYOUT_MAX_BYTES && n > claimed)) {
         a->free(buf);
-        if (err && errlen) snprintf(err, errlen, "%s: read error", path);
+        if (err && errlen)
+            snprintf(err, errlen, bad ? "%s: read error" : "%s: the file is longer than its size says "
+                     "(it changed while being read, or is not an ordinary file)", path);
         return 1;
     }
     char msg[512];
@@ -408,6 +466,39 @@ int layout_read_file(const char *path, LayoutSpec *out, const LSSAlloc *a, char 
         memcpy(out->name, base, k);
         out->name[k] = 0;
     }
+    return 0;
+}
+
+int layout_check_chain(const LayoutSpec *spec, double length, int *n_carts, char *err, size_t errlen) {
+    double n = spec->n_carts > 0 ? (double)spec->n_carts : floor(length / LAYOUT_NOMINAL_PITCH + 0.5);
+    char derived[96] = "";
+    if (spec->n_carts <= 0)
+        snprintf(derived, sizeof derived, " (the %.6g m track at one cart per %g m)", length, LAYOUT_NOMINAL_PITCH);
+    if (!(n >= LAYOUT_MIN_CARTS && n <= LAYOUT_MAX_CARTS)) {
+        if (err && errlen)
+            snprintf(err, errlen, "a chain of %.0f carts is not supported (%d to %d)%s", isfinite(n) ? n : -1.0,
+                     LAYOUT_MIN_CARTS, LAYOUT_MAX_CARTS, derived);
+        return 1;
+    }
+    double pitch = length / n;
+    if (!(pitch >= LAYOUT_MIN_PITCH && pitch <= LAYOUT_MAX_PITCH)) {
+        if (err && errlen)
+            snprintf(err, errlen, "%.0f carts on the %.6g m track make a pitch of %.6g m; it must lie in "
+                     "[%g, %g] m", n, length, pitch, LAYOUT_MIN_PITCH, LAYOUT_MAX_PITCH);
+        return 1;
+    }
+    for (int i = 0; i < spec->n_el; i++) {
+        const ElementSpec *e = &spec->el[i];
+        if (e->kind != EL_STRAIGHT && !(e->radius >= pitch)) {
+            if (err && errlen)
+                snprintf(err, errlen, "line %d: %s radius %.6g m is smaller than the cart pitch %.6g m "
+                         "(%.0f carts on %.6g m): the chain cannot follow it", e->line,
+                         e->kind == EL_VCURVE ? "vcurve" : e->kind == EL_SPIRAL ? "spiral" : "curve", e->radius,
+                         pitch, n, length);
+            return 1;
+        }
+    }
+    if (n_carts) *n_carts = (int)n;
     return 0;
 }
 

@@ -11,6 +11,7 @@ simulation gives a bad value and a logged line, never an exception.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Mapping, Optional, Sequence
@@ -229,8 +230,15 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
     t = t - t[0]
     forces = meas.forces.to_numpy(float)
     if window is not None:
-        if not window > 0:
-            raise ValueError(f"window = {window}: must be positive")
+        # the option against the record (issue 20): a window longer than the record is a mistake,
+        # not "all of it"; one sample interval of slack
+        span = float(t[-1]) if len(t) else 0.0
+        interval = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+        if not (math.isfinite(window) and window > 0):
+            raise ValueError(f"window = {window} s: must be a positive number of seconds")
+        if window > span + interval + 1e-9:
+            raise ValueError(f"window = {window:g} s is longer than the record of {meas.id} "
+                             f"({span:.6g} s, {len(t)} samples at {float(meas.meta['sample_rate']):g} Hz)")
         keep = t <= window + 1e-9
         t, forces = t[keep], forces[keep]
     bounds = {k: COR_BOUNDS for k in CORS}

@@ -11,7 +11,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from lss_fmu.layouts import TABLE2, LayoutError, builtin_layouts, load_track, summary, table2_mismatches
+from lss_fmu.layouts import (TABLE2, LayoutError, builtin_layouts, check_layout, load_track, summary,
+                             table2_mismatches)
 
 
 def _table(out) -> int:
@@ -40,7 +41,7 @@ def _check(targets: list, out, err) -> int:
     rc = 0
     for target in targets:
         try:
-            row = summary(load_track(target))
+            row = summary(check_layout(target))
         except LayoutError as exc:
             print(f"lss layouts check: {' '.join(str(exc).split())}", file=err)
             rc = 1

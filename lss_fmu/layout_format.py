@@ -9,19 +9,25 @@ a NUL byte.
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional, Union
 
+# The layout rules, one place on the Python side (fmu_src/layout_io.h has the
+# same numbers; docs/layouts.md states them).
 MAX_BYTES = 1 << 20
 MAX_ELEMENTS = 10000
 MAX_NUMBER_CHARS = 64
-MAX_SIZE_M = 10000.0
-MAX_ANGLE_DEG = 3600.0
+MAX_SIZE_M = 10000.0        # lengths, radii, rise, |start x, y, z|
+MAX_ANGLE_DEG = 3600.0      # sweeps, angles, |start heading|
 MAX_MOTORS = 10000
-MIN_CARTS, MAX_CARTS = 2, 100000
+MIN_CARTS, MAX_CARTS = 3, 100000
 MAX_MASS = 10000.0
+NOMINAL_PITCH = 1.25        # carts = round(length / 1.25 m) unless given
+MIN_PITCH, MAX_PITCH = 0.5, 5.0   # track length per cart, m
 DEG = math.pi / 180.0
 
 STRAIGHT, CURVE, VCURVE, SPIRAL = 1, 2, 3, 4
@@ -185,8 +191,8 @@ def _header(key: str, toks: list, line: int, spec: LayoutSpec) -> None:
     elif key == "carts":
         spec.n_carts = _integer(v, line, "carts", MIN_CARTS, MAX_CARTS)
     elif key == "start":
-        xyz = tuple(_number(toks[1 + i], line, f"start {c}", False, 0) for i, c in enumerate("xyz"))
-        heading = _number(toks[4], line, "start heading", False, 0)
+        xyz = tuple(_number(toks[1 + i], line, f"start {c}", False, MAX_SIZE_M) for i, c in enumerate("xyz"))
+        heading = _number(toks[4], line, "start heading", False, MAX_ANGLE_DEG)
         spec.start, spec.heading = xyz, heading * DEG
     elif key == "mass":
         spec.cart_mass = _number(v, line, "mass", True, MAX_MASS)
@@ -239,20 +245,69 @@ def parse_layout(text: Union[str, bytes], source: Optional[str] = None) -> Layou
     return spec
 
 
+def _read_regular(path: Path) -> bytes:
+    """At most MAX_BYTES + 1 bytes of a regular file. As the C reader: opened
+    without blocking, then checked on the open file, so that a FIFO, a device or
+    a directory is refused instead of read (a FIFO would block for ever)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except OSError as exc:
+        raise LayoutError(f"cannot open the layout file ({exc.strerror or exc})", None, str(path)) from None
+    try:
+        mode = os.fstat(fd).st_mode
+        if stat.S_ISDIR(mode):
+            raise LayoutError("is a directory, not a layout file", None, str(path))
+        if not stat.S_ISREG(mode):
+            raise LayoutError("is not a regular file (a FIFO, device or socket is not read)", None, str(path))
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb") as f:
+            fd = -1
+            return f.read(MAX_BYTES + 1)
+    except OSError as exc:
+        raise LayoutError(f"read error ({exc.strerror or exc})", None, str(path)) from None
+    finally:
+        if fd >= 0:
+            os.close(fd)
+
+
 def read_layout(path: Union[str, Path]) -> LayoutSpec:
     """Parse a layout file. Without a `name` line the name is the file's stem."""
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read(MAX_BYTES + 1)
-    except OSError as exc:
-        raise LayoutError(f"cannot open the layout file ({exc.strerror or exc})", None, str(path)) from None
+    data = _read_regular(path)
     spec = parse_layout(data, str(path))
     if not spec.name:
         stem = path.name
         dot = stem.rfind(".")
         spec.name = (stem[:dot] if dot > 0 else stem)[:63]
     return spec
+
+
+def n_carts_of(spec: LayoutSpec, length: float) -> float:
+    """The number of carts: given, or round(length / 1.25 m) (halves up)."""
+    return float(spec.n_carts) if spec.n_carts > 0 else math.floor(length / NOMINAL_PITCH + 0.5)
+
+
+def check_chain(spec: LayoutSpec, length: float) -> int:
+    """The rules that need the track's length, as layout_check_chain in C: the
+    number of carts in [3, 100000], the pitch length / carts in [0.5, 5] m, no
+    curve radius below the pitch. The number of carts, or LayoutError."""
+    n = n_carts_of(spec, length)
+    derived = "" if spec.n_carts > 0 else f" (the {length:.6g} m track at one cart per {NOMINAL_PITCH:g} m)"
+    if not MIN_CARTS <= n <= MAX_CARTS:
+        shown = n if math.isfinite(n) else -1.0
+        raise LayoutError(f"a chain of {shown:.0f} carts is not supported ({MIN_CARTS} to {MAX_CARTS}){derived}",
+                          None, spec.source)
+    pitch = length / n
+    if not MIN_PITCH <= pitch <= MAX_PITCH:
+        raise LayoutError(f"{n:.0f} carts on the {length:.6g} m track make a pitch of {pitch:.6g} m; it must lie "
+                          f"in [{MIN_PITCH:g}, {MAX_PITCH:g}] m", None, spec.source)
+    for e in spec.elements:
+        if e.kind != STRAIGHT and not e.radius >= pitch:
+            raise LayoutError(f"{KIND_NAMES[e.kind]} radius {e.radius:.6g} m is smaller than the cart pitch "
+                              f"{pitch:.6g} m ({n:.0f} carts on {length:.6g} m): the chain cannot follow it",
+                              e.line or None, spec.source)
+    return int(n)
 
 
 def format_layout(spec: LayoutSpec, comment: str = "") -> str:

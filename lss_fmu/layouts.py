@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 from typing import Union
 
-from .layout_format import LayoutError, LayoutSpec, parse_layout, read_layout  # noqa: F401 (re-exported)
+from .layout_format import LayoutError, LayoutSpec, check_chain, parse_layout, read_layout  # noqa: F401
 from .track_geometry import MOTOR_LENGTH, PITCH, TOL_ANG, TOL_POS, Track  # noqa: F401
 
 LAYOUT_DIR = Path(__file__).resolve().parent.parent / "fmu_src" / "resources" / "layouts"
@@ -68,8 +68,32 @@ def load_spec(name_or_path: Union[str, Path]) -> LayoutSpec:
 
 def load_track(name_or_path: Union[str, Path], motor_length: float = MOTOR_LENGTH,
                tol_pos: float = TOL_POS, tol_ang: float = TOL_ANG) -> Track:
-    """Parse and build a layout; LayoutError (with file and line) if it is unusable."""
-    return Track(load_spec(name_or_path), motor_length, tol_pos, tol_ang)
+    """Parse and build a layout and apply the rules of a chain on it (carts,
+    pitch, radii: layout_format.check_chain); LayoutError (with file and line)
+    if it is unusable."""
+    track = Track(load_spec(name_or_path), motor_length, tol_pos, tol_ang)
+    check_chain(track.spec, track.length)
+    return track
+
+
+def check_layout(name_or_path: Union[str, Path], fmu: bool = True) -> Track:
+    """What `lss layouts check` answers: the layout rules (load_track), then,
+    with fmu, the chain assembled by the FMU itself, so that the checker accepts
+    exactly what the FMU accepts. Assembly is the one step no rule predicts:
+    carts are placed one after the other along the track and the pitch is
+    solved for the loop to close, which can fail on tight curves (near one
+    curve radius per two cart pitches, docs/layouts.md). LayoutError naming
+    the file."""
+    track = load_track(name_or_path)
+    if fmu:
+        from .runner import ChainSimulator, SimulationError
+        target = str(name_or_path) if str(name_or_path) in builtin_layouts() else str(resolve_layout(name_or_path))
+        try:
+            with ChainSimulator(instance_name="layout_check") as sim:
+                sim.start({"layout.name": target})
+        except SimulationError as exc:
+            raise LayoutError(f"the FMU cannot build a chain on it: {exc}", None, track.spec.source) from None
+    return track
 
 
 def summary(track: Track) -> dict:

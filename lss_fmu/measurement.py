@@ -28,6 +28,8 @@ import datetime as _dt
 import json
 import math
 import os
+import stat
+from collections import Counter
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -49,6 +51,23 @@ COLUMNS = [TIME] + CHANNELS
 UNITS = {TIME: "s", **{c: BY_NAME[c].unit for c in CHANNELS}}
 TIME_TOLERANCE = 0.05       # a time stamp may miss its grid point by this fraction of the interval
 RATE_TOLERANCE = 1e-3       # relative: the rate in meta.json against the time column
+
+# Hard limits of the reader (docs/measurements.md, "Limits"): a file beyond them
+# is refused with a message before it costs time or memory.
+MAX_SAMPLES_BYTES = 256 << 20   # samples.csv
+MAX_META_BYTES = 1 << 20        # meta.json
+MAX_COLUMNS = 64                # fields in the header row (the format has 12)
+MAX_LINE_CHARS = 4096           # characters in any line of samples.csv
+MAX_LISTED = 8                  # names listed in a message before "and N more"
+# Physical limits of the values: a force beyond the transducer's range (meta.json
+# sensor.force_range_N, a number or one per channel; else this default), a
+# wheel speed beyond what the fastest drive could turn the smallest wheel at
+FORCE_RANGE_DEFAULT = 50e3      # N, per channel
+MAX_WHEEL_SPEED = 1000.0        # rad/s: 20 m/s (drive.v_ref's limit) on a 35 mm wheel is 571 rad/s
+MAX_SAMPLE_RATE = 1e6           # Hz
+# nominal values in meta.json must lie within the FMU's range of what they set
+META_RANGES = {"speed_nominal": "drive.v_ref", "pretension_nominal": "chain.pretension",
+               "mu_roll_nominal": "wheel.mu_roll", "Kp_nominal": "drive.Kp", "Ki_nominal": "drive.Ki"}
 
 # meta.json fields: name -> (type, unit or description); type 'number' is int or float
 REQUIRED_META = {
@@ -287,6 +306,15 @@ def validate_meta(meta, path="meta.json", folder: Optional[Path] = None, check_l
     for key in ("pretension_nominal", "trigger_point", "mu_roll_nominal", "Kp_nominal", "Ki_nominal"):
         if key in meta and meta[key] < 0:
             raise MeasurementError(f"must not be negative, got {meta[key]!r}", path, key)
+    for key, fmu_name in META_RANGES.items():
+        hi = BY_NAME[fmu_name].max
+        if key in meta and hi is not None and meta[key] > hi:
+            raise MeasurementError(f"{meta[key]!r} is beyond what the model can run ({fmu_name} <= {hi:g} "
+                                   f"{BY_NAME[fmu_name].unit or ''})".rstrip(), path, key)
+    if meta["sample_rate"] > MAX_SAMPLE_RATE:
+        raise MeasurementError(f"{meta['sample_rate']!r} Hz is beyond {MAX_SAMPLE_RATE:g} Hz", path, "sample_rate")
+    if "sensor" in meta:
+        force_ranges(meta, path)
     try:
         _parse_date(meta["date"])
     except ValueError:
@@ -307,6 +335,63 @@ def protocol_of(meta: Mapping, path="meta.json", duration: Optional[float] = Non
         return protocol.from_meta(meta).check(float(meta["speed_nominal"]), duration)
     except protocol.ProtocolError as exc:
         raise MeasurementError(str(exc).split(": ", 1)[1], path, f"protocol.{exc.field}".rstrip(".")) from None
+
+
+def force_ranges(meta: Optional[Mapping], path="meta.json") -> dict:
+    """{force channel: range in N}: meta.json's sensor.force_range_N (a number
+    for every channel, or one per channel), else FORCE_RANGE_DEFAULT."""
+    spec = ((meta or {}).get("sensor") or {}).get("force_range_N") if isinstance((meta or {}).get("sensor"), dict) \
+        else None
+    out = {c: FORCE_RANGE_DEFAULT for c in FORCE_CHANNELS}
+    if spec is None:
+        return out
+    items = spec.items() if isinstance(spec, dict) else ((c, spec) for c in FORCE_CHANNELS)
+    for c, v in items:
+        if c not in out:
+            raise MeasurementError(f"unknown force channel {str(c)[:40]!r}", path, "sensor.force_range_N")
+        if not _type_ok(v, "number") or not (math.isfinite(v) and v > 0):
+            raise MeasurementError(f"must be a positive number of newtons, got {_json_kind(v)}", path,
+                                   "sensor.force_range_N")
+        out[c] = float(v)
+    return out
+
+
+def _listed(names, k: int = MAX_LISTED) -> str:
+    """'a', 'b', ... and N more: a bounded list of names for a message."""
+    names = list(names)
+    shown = ", ".join(repr(str(n)[:40]) for n in names[:k])
+    return shown + (f" and {len(names) - k:,} more" if len(names) > k else "")
+
+
+def _read_limited(path: Path, limit: int) -> bytes:
+    """The bytes of a regular file of at most `limit` bytes. A FIFO, device or
+    directory is refused without blocking (opened non-blocking, checked on
+    the open file), as the FMU's layout reader does."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except FileNotFoundError:
+        raise MeasurementError("file not found", path) from None
+    except OSError as exc:
+        raise MeasurementError(f"cannot read: {exc.strerror or exc}", path) from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise MeasurementError("is not a regular file (a directory, FIFO or device is not read)", path)
+        if st.st_size > limit:
+            raise MeasurementError(f"is {st.st_size:,} bytes, more than the reader's limit of {limit:,} bytes", path)
+        if hasattr(os, "set_blocking"):
+            os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb") as f:
+            fd = -1
+            data = f.read(limit + 1)
+    except OSError as exc:
+        raise MeasurementError(f"cannot read: {exc.strerror or exc}", path) from None
+    finally:
+        if fd >= 0:
+            os.close(fd)
+    if len(data) > limit:
+        raise MeasurementError(f"is more than the reader's limit of {limit:,} bytes", path)
+    return data
 
 
 def _parse_date(text: str):
@@ -385,10 +470,8 @@ def _validate_layout(meta, path, folder: Path) -> None:
 def read_meta(path: Union[str, Path], check_layout: bool = True) -> dict:
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise MeasurementError("file not found", path) from None
-    except (OSError, UnicodeDecodeError) as exc:
+        text = _read_limited(path, MAX_META_BYTES).decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise MeasurementError(f"cannot read: {exc}", path) from None
     try:
         meta = json.loads(text, parse_constant=_reject_constant)
@@ -406,8 +489,11 @@ def _reject_constant(name):
 # ----------------------------------------------------------------------------------------
 # samples
 
-def validate_samples(df: pd.DataFrame, sample_rate: float, path="samples", line_of_row=None) -> None:
-    """Columns, finiteness, strictly increasing regular time at sample_rate."""
+def validate_samples(df: pd.DataFrame, sample_rate: float, path="samples", line_of_row=None,
+                     force_range: Optional[Mapping] = None) -> None:
+    """Columns, finiteness, strictly increasing regular time at sample_rate;
+    forces within the transducer's range (`force_range`: {channel: N}, default
+    FORCE_RANGE_DEFAULT) and wheel speeds within MAX_WHEEL_SPEED."""
     cols = list(df.columns)
     _check_columns(cols, path, header_line=None)
     n = len(df)
@@ -425,23 +511,42 @@ def validate_samples(df: pd.DataFrame, sample_rate: float, path="samples", line_
                                    f"record must be cut or filled by hand, not here"
                                    + (f" ({len(bad)} such values)" if len(bad) > 1 else ""),
                                    path, c, line_of_row(r), r + 1)
+    ranges = dict(force_range or {})
+    for c in CHANNELS:
+        limit = ranges.get(c, FORCE_RANGE_DEFAULT) if c in FORCE_CHANNELS else MAX_WHEEL_SPEED
+        x = df[c].to_numpy(dtype=float)
+        bad = np.nonzero(np.abs(x) > limit)[0]
+        if len(bad):
+            r = int(bad[0])
+            what = ("the force transducer's range of {:g} N (meta.json sensor.force_range_N; default {:g} N)"
+                    .format(limit, FORCE_RANGE_DEFAULT) if c in FORCE_CHANNELS else
+                    f"{MAX_WHEEL_SPEED:g} rad/s, faster than any drive turns a wheel")
+            raise MeasurementError(f"value {float(x[r])!r} {UNITS[c]} is beyond {what}"
+                                   + (f" ({len(bad):,} such values)" if len(bad) > 1 else ""),
+                                   path, c, line_of_row(r), r + 1)
     _check_time(df[TIME].to_numpy(dtype=float), float(sample_rate), path, line_of_row)
 
 
 def _check_columns(cols, path, header_line):
-    dup = sorted({c for c in cols if cols.count(c) > 1})
+    """Linear in the number of columns; a message lists at most MAX_LISTED names."""
+    if len(cols) > MAX_COLUMNS:
+        raise MeasurementError(f"{len(cols):,} columns, more than the reader's limit of {MAX_COLUMNS} (the format "
+                               f"has {len(COLUMNS)}: {', '.join(COLUMNS)})", path, line=header_line)
+    counts = Counter(cols)
+    dup = sorted(c for c, k in counts.items() if k > 1)
     if dup:
-        raise MeasurementError(f"column{'s' if len(dup) > 1 else ''} {', '.join(map(repr, dup))} "
+        raise MeasurementError(f"column{'s' if len(dup) > 1 else ''} {_listed(dup)} "
                                f"appear more than once", path, line=header_line)
-    missing = [c for c in COLUMNS if c not in cols]
-    extra = [c for c in cols if c not in COLUMNS]
+    known = set(COLUMNS)
+    missing = [c for c in COLUMNS if c not in counts]
+    extra = [c for c in cols if c not in known]
     if missing:
         raise MeasurementError(f"missing channel{'s' if len(missing) > 1 else ''}: {', '.join(missing)}"
-                               + (f" (found instead: {', '.join(map(repr, extra))})" if extra else ""),
+                               + (f" (found instead: {_listed(extra)})" if extra else ""),
                                path, missing[0], header_line)
     if extra:
-        raise MeasurementError(f"unknown channel{'s' if len(extra) > 1 else ''} {', '.join(map(repr, extra))}"
-                               f" (the columns are {', '.join(COLUMNS)})", path, extra[0], header_line)
+        raise MeasurementError(f"unknown channel{'s' if len(extra) > 1 else ''} {_listed(extra)}"
+                               f" (the columns are {', '.join(COLUMNS)})", path, str(extra[0])[:40], header_line)
 
 
 def _check_time(t: np.ndarray, rate: float, path, line_of_row) -> None:
@@ -470,15 +575,12 @@ def _check_time(t: np.ndarray, rate: float, path, line_of_row) -> None:
                                path, TIME, line_of_row(r), r + 1)
 
 
-def read_samples(path: Union[str, Path], sample_rate: float) -> pd.DataFrame:
-    """Read and check samples.csv; the columns are returned in the order of COLUMNS."""
+def read_samples(path: Union[str, Path], sample_rate: float, force_range: Optional[Mapping] = None) -> pd.DataFrame:
+    """Read and check samples.csv; the columns are returned in the order of COLUMNS.
+    Linear in the file's size; the limits MAX_SAMPLES_BYTES, MAX_LINE_CHARS and
+    MAX_COLUMNS apply (docs/measurements.md)."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise MeasurementError("file not found", path) from None
-    except OSError as exc:
-        raise MeasurementError(f"cannot read: {exc}", path) from None
+    raw = _read_limited(path, MAX_SAMPLES_BYTES)
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -488,6 +590,10 @@ def read_samples(path: Union[str, Path], sample_rate: float) -> pd.DataFrame:
     if lines and lines[-1] == "":
         lines.pop()
     lines = [ln[:-1] if ln.endswith("\r") else ln for ln in lines]
+    long = next((k for k, ln in enumerate(lines) if len(ln) > MAX_LINE_CHARS), None)
+    if long is not None:
+        raise MeasurementError(f"{len(lines[long]):,} characters, more than the reader's limit of "
+                               f"{MAX_LINE_CHARS:,} per line", path, line=long + 1)
     i = 0
     while i < len(lines) and lines[i].startswith("#"):
         i += 1
@@ -541,7 +647,7 @@ def read_samples(path: Union[str, Path], sample_rate: float) -> pd.DataFrame:
                     raise MeasurementError(f"{s!r} is not a number", path, c, first + r + 1, r + 1)
         data[c] = x
     df = pd.DataFrame({c: data[c] for c in COLUMNS})
-    validate_samples(df, sample_rate, path, line_of_row=lambda r: first + r + 1)
+    validate_samples(df, sample_rate, path, line_of_row=lambda r: first + r + 1, force_range=force_range)
     return df
 
 
@@ -565,7 +671,7 @@ def load_measurement(path: Union[str, Path], check_layout: bool = True) -> Measu
     if not path.is_dir():
         raise MeasurementError("no such measurement folder", path)
     meta = read_meta(path / META_FILE, check_layout)
-    samples = read_samples(path / SAMPLES_FILE, float(meta["sample_rate"]))
+    samples = read_samples(path / SAMPLES_FILE, float(meta["sample_rate"]), force_ranges(meta, path / META_FILE))
     protocol_of(meta, path / META_FILE, len(samples) / float(meta["sample_rate"]))
     source = "meta.json" if "design_variables" in meta else "derived from the nominal values in meta.json"
     return Measurement(path, meta, samples, source)
@@ -613,7 +719,7 @@ def write_measurement(folder: Union[str, Path], samples: pd.DataFrame, meta: Map
     meta = dict(meta)
     validate_meta(meta, META_FILE, folder, check_layout=True)
     samples = samples[COLUMNS] if all(c in samples.columns for c in COLUMNS) else samples
-    validate_samples(samples, float(meta["sample_rate"]), SAMPLES_FILE)
+    validate_samples(samples, float(meta["sample_rate"]), SAMPLES_FILE, force_range=force_ranges(meta, META_FILE))
     if folder.exists() and any(folder.iterdir()) and not overwrite:
         raise FileExistsError(f"{folder} exists and is not empty (overwrite=True to replace)")
     folder.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,8 @@ compiled together with the model sources:
 - under AddressSanitizer + UndefinedBehaviorSanitizer (LeakSanitizer on):
   1000 instantiate / set / setup / initialise / step / reset / re-initialise /
   step / terminate / free cycles with wrong calls and every error path, 4
-  instances on 4 threads, 300 corrupted serialized FMU states; no sanitizer
+  instances on 4 threads, 300 corrupted serialized FMU states, every word of a
+  serialized state set to NaN, +-inf, 0, -1, 1e300 in turn; no sanitizer
   report, every allocation returned through the freeMemory callback;
 - under ThreadSanitizer: instances stepped at once on several threads, no data
   race, the same results as one after another.
@@ -80,7 +81,7 @@ def test_harness_under_asan_ubsan(workdir):
     env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:detect_stack_use_after_return=1",
                UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1")
     res = subprocess.run([str(exe), resource_uri(), "--cycles", str(CYCLES), "--stop", str(STOP),
-                          "--step", str(STEP), "--threads", "4", "--corrupt", "300"],
+                          "--step", str(STEP), "--threads", "4", "--corrupt", "300", "--fieldwise"],
                          capture_output=True, text=True, env=env, timeout=600)
     print(res.stdout)
     report = res.stdout + res.stderr
@@ -92,6 +93,12 @@ def test_harness_under_asan_ubsan(workdir):
     assert s["live_at_exit"] == 0 and s["failures"] == 0
     assert s["bad_inputs"] > 20 * CYCLES
     assert "threads: 4 instances stepped at once agree" in res.stdout
+    # every 8-byte word of a serialized state set to NaN, +-inf, 0, -1, 1e300 (issue 20)
+    m = re.search(r"fieldwise states: (\d+) words x 6 values; refused at deserialize (\d+), at set (\d+); "
+                  r"stepped (\d+), discarded (\d+)", res.stdout)
+    assert m, res.stdout[-2000:]
+    words, *counts = map(int, m.groups())
+    assert words > 1000 and sum(counts) > 5 * words
 
 
 def test_threads_under_tsan(workdir):

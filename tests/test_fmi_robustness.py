@@ -266,6 +266,10 @@ def bad_layout_names(tmp_path):
              str(tmp_path / "missing" / "x.layout"), "\u00fcml\u00e4ut"]
     if so:
         names.append(str(so))
+    if hasattr(os, "mkfifo"):  # would block a reader for ever (issue 20)
+        fifo = tmp_path / "fifo.layout"
+        os.mkfifo(fifo)
+        names.append(str(fifo))
     return names
 
 
@@ -339,6 +343,16 @@ def test_do_step_extremes():
             if status == OK:
                 t = s.fmu.getRealStatus(2)  # fmi2LastSuccessfulTime
         s.fmu.doStep(t, STEP)  # and it goes on
+
+
+def test_enter_initialization_without_setup_experiment():
+    """Decided in issue 20: accepted with the defaults and fmi2Warning + message."""
+    with Slave() as s:
+        status, n = raw(s, "fmi2EnterInitializationMode")
+        record("fmi2EnterInitializationMode without fmi2SetupExperiment", s, status, n, WARNING)
+        assert "without fmi2SetupExperiment" in s.messages[-1][2]
+        s.fmu.exitInitializationMode()
+        s.fmu.doStep(0.0, STEP)
 
 
 # --- status, derivatives, model exchange, logging ------------------------------------------
@@ -508,6 +522,66 @@ def test_corrupted_serialized_states_are_refused_or_harmless():
         buf = ctypes.create_string_buffer(bad, len(bad))
         assert raw(s, "fmi2DeSerializeFMUstate", buf, len(bad), byref(state))[0] == ERROR
         assert "another build" in s.last_error()
+
+
+WORD_VALUES = (float("nan"), float("inf"), -float("inf"), 0.0, -1.0, 1e300)
+
+
+def test_every_word_of_a_serialized_state():
+    """Each 8-byte word of a serialized state (header, parameters, the chain's
+    solver fields, states, contact memory) set in turn to NaN, +-inf, 0, -1 and
+    1e300 (issue 20): refused with a message at deserialize or set, or, if
+    still a valid state, stepped 1 ms to the right time or discarded with a
+    message; never a hang, never fmi2OK at a wrong time."""
+    import struct
+    import time
+    watch = [vr("chain.v_mean"), vr("drive.F_total"), vr("transducer.joint.F_x"), vr("energy.W_damping")]
+    with initialised() as s:
+        s.fmu.doStep(0.0, STEP)
+        good = s.fmu.getFMUstate()
+        blob = bytes(s.fmu.serializeFMUstate(good))
+        fmi = s.fmu._functions
+        s.fmu.doStep(STEP, 1e-3)
+        reference = struct.pack("4d", *s.fmu.getReal(watch))  # what the untouched state steps to
+        s.fmu.setFMUstate(good)
+        slowest = 0.0
+        category = "serialized FMU state, every 8-byte word set to NaN, +-inf, 0, -1, 1e300"
+        n_carts = s.get("chain.n_carts")
+        ny, c0 = 13 * n_carts + 6, len(blob) // 8 - (24 + 45 * n_carts)  # chain.c, chain_state_save
+
+        def region(w: int) -> str:
+            k = w - c0
+            return ("header and parameters" if k < 0 else "solver fields" if k < 12 else
+                    "states (positions, orientations, velocities)" if k < 12 + ny else
+                    "contact memory and warm starts" if k < 12 + ny + 19 * n_carts else "FSAL derivative")
+        for w in range(len(blob) // 8):
+            for v in WORD_VALUES:
+                bad = blob[:8 * w] + struct.pack("=d", v) + blob[8 * w + 8:]
+                if bad == blob:
+                    continue
+                buf = ctypes.create_string_buffer(bad, len(bad))
+                state = c_void_p()
+                n = len(s.messages)
+                status = fmi["fmi2DeSerializeFMUstate"](s.fmu.component, buf, len(bad), byref(state))
+                if status == OK:
+                    status = fmi["fmi2SetFMUstate"](s.fmu.component, state)
+                    if status == OK:
+                        t = s.fmu.getRealStatus(2)
+                        assert t == STEP, (w, v, t)  # the time of the state taken
+                        start = time.perf_counter()
+                        status = fmi["fmi2DoStep"](s.fmu.component, t, 1e-3, 1)
+                        slowest = max(slowest, time.perf_counter() - start)
+                        if status == OK:
+                            assert s.fmu.getRealStatus(2) == t + 1e-3, (w, v)
+                            same = struct.pack("4d", *s.fmu.getReal(watch)) == reference
+                    s.fmu.freeFMUstate(state)
+                    s.fmu.setFMUstate(good)
+                suffix = "" if status != OK else (" [no effect: an unused byte range or no influence]" if same else
+                                                   f" [{region(w)}: another valid state, stepped to the right time]")
+                record(category + suffix, s, status, n, (OK, ERROR, DISCARD))
+        print(f"\nevery word of a serialized state: the slowest fmi2DoStep of 1 ms took {slowest:.2f} s")
+        assert slowest < 30.0
+        s.fmu.freeFMUstate(good)
 
 
 # --- random layout files through the FMU --------------------------------------------------------

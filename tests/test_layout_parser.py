@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import locale
 import math
+from collections import Counter
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lss_fmu.layout_format import (DEG, MAX_BYTES, LayoutError, format_layout, parse_layout, read_layout)
+from lss_fmu.layout_format import (DEG, MAX_BYTES, LayoutError, check_chain, format_layout, parse_layout,
+                                   read_layout)
+from lss_fmu.layouts import LAYOUT_DIR, check_layout
 from lss_fmu.track_c import CTrack, c_parse_error, load_lib
 from lss_fmu.track_geometry import Track
 
@@ -56,7 +60,10 @@ MALFORMED = [
     ("bad coupling", "coupling C\n", 1, "coupling type must be A or B"),
     ("motors not int", "motors 2.5\n", 1, "not a whole number"),
     ("motors negative", "motors -1\n", 1, "not a whole number"),
-    ("carts too few", "carts 1\n", 1, "carts must be 2 to 100000"),
+    ("carts too few", "carts 1\n", 1, "carts must be 3 to 100000"),
+    ("two carts", "carts 2\n", 1, "carts must be 3 to 100000"),
+    ("start far away", "start 1e300 0 0 0\n", 1, "start x is too large: 1e300 (limit 10000)"),
+    ("start heading", "start 0 0 0 1e6\n", 1, "start heading is too large"),
     ("start arity", "start 0 0 0\n", 1, "takes 4 values"),
     ("mass zero", "mass 0\n", 1, "mass must be positive"),
     ("bad name", "name a/b\n", 1, "name 'a/b' must be"),
@@ -265,3 +272,92 @@ def test_random_element_lists(lib, lines, motors):
         assert np.abs(cc - pc).max() <= 1e-9 * max(1.0, py.length)
         assert np.abs(cR - pR).max() <= 1e-9
         assert np.abs(c.motors - py.motors).max(initial=0) <= 1e-9
+
+
+# --- one set of rules: the checker and the FMU agree (issue 20) ----------------------------------
+
+CORPUS = Path(__file__).parent / "c" / "corpus_layout"
+LOOP = "wheel A\ncoupling A\nmotors 0\n"
+# the issue's five cases the checker used to accept and the FMU refused, then
+# rule boundaries, then a layout within the rules whose chain the FMU cannot assemble
+RULE_CASES = {
+    "two carts": LOOP + "carts 2\ncurve 0.5 360 left\n",
+    "0.1 mm full circle": LOOP + "curve 0.0001 360 left\n",
+    "loop of tiny curves": LOOP + "curve 0.01 90 left\n" * 4 + "carts 3\n",
+    "tiny curves, derived carts": LOOP + "straight 0.01\ncurve 0.01 90 left\n" * 4,
+    "start 1e300": LOOP + "start 1e300 0 0 0\nstraight 10\ncurve 3 180 left\nstraight 10\ncurve 3 180 left\n",
+    "pitch too long": LOOP + "carts 3\nstraight 10\ncurve 6 180 left\nstraight 10\ncurve 6 180 left\n",
+    "radius below the pitch": LOOP + "carts 12\nstraight 10\ncurve 3 180 left\nstraight 10\ncurve 3 180 left\n",
+    "start at the limits": LOOP + "start 10000 -10000 10000 3600\nstraight 10\ncurve 3 180 left\nstraight 10\n"
+                           "curve 3 180 left\n",
+    "too many carts": LOOP + "straight 9000\ncurve 3 180 left\nstraight 9000\ncurve 3 180 left\n" * 7,
+    "assembly fails": LOOP + "carts 18\n" + "straight 3.070831169693203\ncurve 2.5277921940805563 180 left\n" * 2,
+}
+
+
+def rules_c(lib, data: bytes):
+    """(ok, message): every rule the FMU applies before assembling (lss_layout_rules_text)."""
+    ffi = FFI_LIB[0]
+    err, n = ffi.new("char[1024]"), ffi.new("int *")
+    ok = lib.lss_layout_rules_text(data, len(data), 0.6, n, err, 1024) == 0
+    return ok, ffi.string(err).decode("latin-1")
+
+
+def rules_python(data: bytes):
+    try:
+        spec = parse_layout(data)
+        check_chain(spec, Track(spec).length)
+    except LayoutError as exc:
+        return False, str(exc)
+    return True, ""
+
+
+def fmu_builds(lib, path: Path):
+    """(ok, message) of the FMU's chain_create on the file, default parameters."""
+    ffi = FFI_LIB[0]
+    par = lib.lss_params_new()
+    lib.lss_params_set_string(par, b"layout.name", str(path).encode())
+    err = ffi.new("char[1024]")
+    c = lib.lss_chain_new(par, ffi.NULL, err, 1024)
+    lib.lss_params_free(par)
+    if c != ffi.NULL:
+        lib.lss_chain_free(c)
+    return c != ffi.NULL, ffi.string(err).decode("latin-1")
+
+
+FFI_LIB: list = []
+
+
+def test_checker_and_fmu_agree_on_the_corpus_and_the_rule_cases(tmp_path):
+    """Every file of the fuzzing corpus, the built-in layouts and RULE_CASES:
+    the rules in Python (layout_format) and in C (layout_io.c, as chain_create
+    applies them) give the same verdict with the same words, and
+    `lss layouts check` (check_layout) accepts exactly what the FMU builds."""
+    from lss_fmu import ccore
+    FFI_LIB[:] = ccore.load()
+    lib = FFI_LIB[1]
+    paths = sorted(CORPUS.iterdir()) + sorted(LAYOUT_DIR.glob("*.layout"))
+    for name, text in RULE_CASES.items():
+        paths.append(tmp_path / (name.replace(" ", "_").replace(",", "") + ".layout"))
+        paths[-1].write_text(text)
+    verdicts = Counter()
+    for path in paths:
+        data = path.read_bytes()
+        (c_ok, c_msg), (py_ok, py_msg) = rules_c(lib, data), rules_python(data)
+        assert c_ok == py_ok, (path.name, c_msg, py_msg)  # the same rules on both sides ...
+        if not c_ok and "does not close" not in c_msg:
+            assert py_msg.startswith(c_msg) or py_msg.endswith(c_msg), (path.name, c_msg, py_msg)  # ... same words
+        # the whole verdict: the FMU building the chain against `lss layouts check`
+        fmu_ok, fmu_msg = fmu_builds(lib, path.resolve()) if c_ok else (False, c_msg)
+        try:
+            check_layout(path.resolve())
+            checker_ok = True
+        except LayoutError:
+            checker_ok = False
+        assert checker_ok == fmu_ok, (path.name, fmu_msg)
+        verdicts[(c_ok, fmu_ok)] += 1
+    print(f"\nlayout verdicts (rules ok, FMU builds): {dict(verdicts)} of {len(paths)} files")
+    assert verdicts[(True, True)] >= 15 and verdicts[(False, False)] >= 300 and verdicts[(True, False)] >= 1
+    for name in ("two carts", "0.1 mm full circle", "loop of tiny curves", "start 1e300", "radius below the pitch"):
+        assert not rules_python(RULE_CASES[name].encode())[0], name
+    assert rules_python(RULE_CASES["start at the limits"].encode())[0]

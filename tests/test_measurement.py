@@ -80,7 +80,7 @@ def test_round_trip_exact(tmp_path):
     s = make_samples(1000, seed=3)
     s["transducer.joint.F_x"] = s["transducer.joint.F_x"] / 3.0 * math.pi  # long decimals
     s.loc[5, "transducer.joint.F_y"] = 5e-324       # subnormal
-    s.loc[6, "transducer.joint.F_y"] = -1.7976931348623157e308
+    s.loc[6, "transducer.joint.F_y"] = -49999.999999999993  # just within the default transducer range
     s.loc[7, "transducer.joint.F_y"] = -0.0
     meta = make_meta(notes="ünïcødé notes, \"quoted\"", operator="A. N. Other", extra_field=[1, 2, 3])
     M.write_measurement(tmp_path / "m", s, meta)
@@ -98,8 +98,10 @@ def test_round_trip_exact(tmp_path):
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=11 * 3, max_size=11 * 3))
+@given(st.lists(st.floats(min_value=-M.MAX_WHEEL_SPEED, max_value=M.MAX_WHEEL_SPEED), min_size=11 * 3,
+                max_size=11 * 3))
 def test_round_trip_any_finite_float(tmp_path, values):
+    """Any float within the physical limits (issue 20: beyond them a value is refused)."""
     s = make_samples(3)
     vals = np.array(values).reshape(3, 11)
     for j, c in enumerate(M.CHANNELS):
@@ -341,3 +343,86 @@ def test_writer_refuses_bad_input(tmp_path):
     M.write_measurement(tmp_path / "m", make_samples(), make_meta())
     with pytest.raises(FileExistsError):
         M.write_measurement(tmp_path / "m", make_samples(), make_meta())
+
+
+# -------------------------------------------------------------------------- hostile input (issue 20)
+
+def test_header_check_is_linear_with_a_short_message():
+    import time
+    cols = M.COLUMNS + [f"x{i}" for i in range(40_000)]
+    start = time.perf_counter()
+    with pytest.raises(M.MeasurementError) as info:
+        M._check_columns(cols, "samples.csv", 1)
+    assert time.perf_counter() - start < 0.5
+    assert "40,012 columns" in str(info.value) and len(str(info.value)) < 400
+    # within the column limit, many unknown and duplicated names: listed, then counted
+    with pytest.raises(M.MeasurementError, match=r"and 42 more") as info:
+        M._check_columns(M.COLUMNS + [f"y{i}" for i in range(50)], "samples.csv", 1)
+    assert len(str(info.value)) < 600
+    with pytest.raises(M.MeasurementError, match=r"appear more than once"):
+        M._check_columns(M.COLUMNS + ["z"] * 20 + ["w"] * 3, "samples.csv", 1)
+
+
+def test_two_million_columns_are_refused_at_once(meas):
+    import time
+    p = meas / "samples.csv"
+    lines = p.read_text().split("\n")
+    lines[0] = lines[0] + ",x" * 2_000_000
+    p.write_text("\n".join(lines))
+    start = time.perf_counter()
+    err = rejected(meas, "samples.csv", "line 1", "more than the reader's limit of 4,096 per line")
+    assert time.perf_counter() - start < 5 and len(str(err)) < 300
+
+
+def test_file_size_limit(meas, monkeypatch):
+    monkeypatch.setattr(M, "MAX_SAMPLES_BYTES", 10_000)
+    rejected(meas, "samples.csv", "more than the reader's limit of 10,000 bytes")
+
+
+def test_fifo_is_refused_without_blocking(meas):
+    import os
+    if not hasattr(os, "mkfifo"):
+        pytest.skip("no FIFOs here")
+    (meas / "samples.csv").unlink()
+    os.mkfifo(meas / "samples.csv")
+    rejected(meas, "samples.csv", "not a regular file")
+
+
+@pytest.mark.parametrize("column,value,fragment", [
+    ("transducer.joint.F_x", "1e308", "beyond the force transducer's range of 50000 N"),
+    ("transducer.driving.F_left", "-50000.5", "beyond the force transducer's range"),
+    ("transducer.wheel.w_sl", "5000", "beyond 1000 rad/s"),
+])
+def test_physically_absurd_values_name_file_row_and_column(meas, column, value, fragment):
+    rewrite_csv(meas, lambda lines: set_cell(lines, 7, column, value))
+    err = rejected(meas, "samples.csv", "line 9 (data row 7)", f"column '{column}'", fragment)
+    assert err.row == 7 and err.column == column
+
+
+def test_declared_force_range(tmp_path):
+    s = make_samples()
+    meta = make_meta(sensor={"force_range_N": {"transducer.joint.F_x": 400.0}})
+    with pytest.raises(M.MeasurementError, match=r"range of 400 N"):
+        M.write_measurement(tmp_path / "a", s, meta)
+    with pytest.raises(M.MeasurementError, match=r"sensor.force_range_N"):
+        M.validate_meta(make_meta(sensor={"force_range_N": -1}), check_layout=False)
+    M.write_measurement(tmp_path / "b", s, make_meta(sensor={"force_range_N": 2000.0}))
+
+
+@pytest.mark.parametrize("field,value", [("speed_nominal", 1e300), ("speed_nominal", 25.0),
+                                         ("pretension_nominal", 3.0), ("sample_rate", 1e300),
+                                         ("mu_roll_nominal", 7.0)])
+def test_absurd_nominal_values_are_refused(field, value):
+    with pytest.raises(M.MeasurementError) as info:
+        M.validate_meta(make_meta(**{field: value}), check_layout=False)
+    assert info.value.column == field
+
+
+def test_window_longer_than_the_record_names_option_value_and_length(meas):
+    from identification.problem import from_measurement
+    m = M.load_measurement(meas)
+    with pytest.raises(ValueError, match=r"window = 1e\+09 s is longer than the record of test-01 \(1.99667 s, 600"):
+        from_measurement(m, "LW", window=1e9)
+    for bad in (float("nan"), float("inf"), 0.0, -1.0):
+        with pytest.raises(ValueError, match="window"):
+            from_measurement(m, "LW", window=bad)

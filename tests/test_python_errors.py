@@ -109,10 +109,9 @@ def test_messages_stay_with_their_simulator(fmu_file):
 
 
 def test_discarded_step_is_a_simulation_error(csim):
-    with pytest.raises(SimulationError) as exc:
-        # legal, absurd: carts of 1/1000 of their mass in a chain half a metre too long
+    with pytest.raises(SimulationError) as exc:  # legal, absurd parameters (test_fmi_behaviour.crush)
         short(csim, **{"layout.name": "layout7", "cart.mass_factor": 1e-3, "chain.pretension": -0.5})
-    assert "collapsed" in str(exc.value)
+    assert "collapsed" in str(exc.value) or "non-finite" in str(exc.value)
     assert len(short(csim)) == 3
 
 

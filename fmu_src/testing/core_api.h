@@ -16,6 +16,10 @@ void *lss_track_open_text(const char *text, int len, double motor_length, double
 void lss_track_close(void *h);
 /* Parse only (no geometry): 0 or non-zero with err filled; n_el gets the element count. */
 int lss_layout_check_text(const char *text, int len, int *n_el, char *err, int errlen);
+/* Every layout rule the FMU applies before assembling the chain: parse, the
+ * track with the FMU's closure limits (1 mm, 0.1 mrad), layout_check_chain.
+ * 0 with the number of carts, or 1 with the FMU's message. */
+int lss_layout_rules_text(const char *text, int len, double motor_length, int *n_carts, char *err, int errlen);
 double lss_track_length(void *h);
 /* out15: c[3], R[9] row-major (columns t n b), w[3] turn rate in the frame (rad/m) */
 void lss_track_eval(void *h, double s, double *out15);

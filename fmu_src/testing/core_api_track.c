@@ -61,6 +61,24 @@ int lss_layout_check_text(const char *text, int len, int *n_el, char *err, int e
     return rc;
 }
 
+int lss_layout_rules_text(const char *text, int len, double motor_length, int *n_carts, char *err, int errlen) {
+    LayoutSpec spec;
+    Track track;
+    char msg[512];
+    *n_carts = 0;
+    if (layout_parse(text, len > 0 ? (size_t)len : 0, &spec, &STD_ALLOC, err, errsize(errlen))) return 1;
+    /* as chain_create: the FMU's closure limits, then the rules that need the length */
+    int rc = track_build(&spec, motor_length, 1e-3, 1e-4, &track, &STD_ALLOC, msg, sizeof msg) ||
+             layout_check_chain(&spec, track.length, n_carts, msg, sizeof msg);
+    if (rc && err && errlen > 0) {
+        strncpy(err, msg, errsize(errlen) - 1);
+        err[errlen - 1] = 0;
+    }
+    track_free(&track, &STD_ALLOC);
+    layout_spec_free(&spec, &STD_ALLOC);
+    return rc;
+}
+
 void lss_track_close(void *h) {
     TrackHandle *t = h;
     if (!t) return;

@@ -6,7 +6,7 @@
  * (and by tests/c/leakcheck.sh for the long run under valgrind or LSan).
  *
  *   test_harness RESOURCE_URI [--cycles N] [--stop T] [--step H]
- *                [--threads K] [--corrupt R] [--seed S] [--verbose]
+ *                [--threads K] [--corrupt R] [--fieldwise] [--seed S] [--verbose]
  *
  * --cycles N   N cycles of instantiate / set / setup / initialise / step to T
  *              / (some cycles: FMU state round trip) / wrong calls / reset /
@@ -17,6 +17,9 @@
  *              results as one after another (bit for bit).
  * --corrupt R  R corrupted serialized FMU states: deserialize / set / step
  *              must answer with a status, never crash.
+ * --fieldwise  every 8-byte word of a serialized state set to NaN, +-inf, 0,
+ *              -1, 1e300 in turn: refused with a message, or stepped to the
+ *              right time (fmi2OK) or discarded; never a hang.
  *
  * Memory comes from calloc/free callbacks that count live blocks; at the end
  * every block must have been returned. Every call expected to fail must
@@ -331,10 +334,10 @@ static void error_path(Env *env, const Opts *o, int kind) {
         if (!c) return;
         fmi2Integer big = 99999;
         CALL(fmi2OK, fmi2SetInteger(c, &vr_t, 1, &big));
-        CALL(fmi2OK, fmi2EnterInitializationMode(c));  /* without fmi2SetupExperiment: defaults */
+        CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* without fmi2SetupExperiment: defaults */
         CALL(fmi2Error, fmi2ExitInitializationMode(c));
         CALL(fmi2OK, fmi2Reset(c));                    /* and recover */
-        CALL(fmi2OK, fmi2EnterInitializationMode(c));
+        CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* no fmi2SetupExperiment: defaults, a warning */
         CALL(fmi2OK, fmi2ExitInitializationMode(c));
         CALL(fmi2OK, fmi2DoStep(c, 0.0, o->h, fmi2True));
         fmi2FreeInstance(c);                           /* without terminate */
@@ -359,7 +362,7 @@ static void error_path(Env *env, const Opts *o, int kind) {
         c = fmi2Instantiate("h", fmi2CoSimulation, LSS_GUID, "http://example.com/x", &cb, 0, 0);
         EXPECT(c != NULL && env->n_msg[fmi2Warning] > 0, "instantiate with an http URI");
         if (!c) return;
-        CALL(fmi2OK, fmi2EnterInitializationMode(c));
+        CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* no fmi2SetupExperiment: defaults, a warning */
         CALL(fmi2Error, fmi2ExitInitializationMode(c));
         fmi2FreeInstance(c);
         break;
@@ -372,7 +375,7 @@ static void error_path(Env *env, const Opts *o, int kind) {
         fmi2String lay7 = "layout7";
         CALL(fmi2OK, fmi2SetString(c, &vr_s, 1, &lay7));
         CALL(fmi2OK, fmi2SetReal(c, vr_dm, 2, crushed));
-        CALL(fmi2OK, fmi2EnterInitializationMode(c));
+        CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* no fmi2SetupExperiment: defaults, a warning */
         CALL(fmi2OK, fmi2ExitInitializationMode(c));
         CALL(fmi2Discard, fmi2DoStep(c, 0.0, o->h, fmi2True));
         fmi2Real last = -1;
@@ -389,7 +392,7 @@ static void error_path(Env *env, const Opts *o, int kind) {
         if (!c) return;
         fmi2FMUstate s = NULL;
         CALL(fmi2OK, fmi2GetFMUstate(c, &s));
-        CALL(fmi2OK, fmi2EnterInitializationMode(c));
+        CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* no fmi2SetupExperiment: defaults, a warning */
         CALL(fmi2OK, fmi2GetReal(c, &vr_out, 1, &r));
         CALL(fmi2OK, fmi2GetFMUstate(c, &s));  /* now with the chain: replaced by a larger one */
         CALL(fmi2OK, fmi2SetFMUstate(c, s));
@@ -417,7 +420,7 @@ static void corrupt_states(Env *env, const Opts *o, int rounds) {
     fmi2CallbackFunctions cb = {h_logger, h_calloc, h_free, NULL, env};
     fmi2Component c = instantiate(env, &cb, o->uri);
     if (!c) return;
-    CALL(fmi2OK, fmi2EnterInitializationMode(c));
+    CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* no fmi2SetupExperiment: defaults, a warning */
     CALL(fmi2OK, fmi2ExitInitializationMode(c));
     CALL(fmi2OK, fmi2DoStep(c, 0.0, 0.01, fmi2True));
     fmi2FMUstate good = NULL, s = NULL;
@@ -476,6 +479,73 @@ static void corrupt_states(Env *env, const Opts *o, int rounds) {
     free(buf);
 }
 
+/* Every 8-byte word of a serialized state set in turn to NaN, +inf, -inf, 0,
+ * -1 and 1e300: deserialize / set / step 1e-4 s. A state accepted must step
+ * to the right time (fmi2OK) or end in fmi2Discard, never hang; a refusal
+ * must log a message. */
+static void fieldwise_states(Env *env, const Opts *o) {
+    fmi2CallbackFunctions cb = {h_logger, h_calloc, h_free, NULL, env};
+    fmi2Component c = instantiate(env, &cb, o->uri);
+    if (!c) return;
+    CALL(fmi2Warning, fmi2EnterInitializationMode(c));  /* no fmi2SetupExperiment: defaults, a warning */
+    CALL(fmi2OK, fmi2ExitInitializationMode(c));
+    CALL(fmi2OK, fmi2DoStep(c, 0.0, 0.01, fmi2True));
+    fmi2FMUstate good = NULL, s = NULL;
+    CALL(fmi2OK, fmi2GetFMUstate(c, &good));
+    size_t size = 0;
+    CALL(fmi2OK, fmi2SerializedFMUstateSize(c, good, &size));
+    fmi2Byte *ref = malloc(size), *buf = malloc(size);
+    EXPECT(ref && buf, "malloc");
+    if (!ref || !buf) return;
+    CALL(fmi2OK, fmi2SerializeFMUstate(c, good, ref, size));
+    const double values[6] = {NAN, INFINITY, -INFINITY, 0.0, -1.0, 1e300};
+    long outcome[4] = {0};  /* refused at deserialize, refused at set, stepped, discarded */
+    for (size_t w = 0; w + 8 <= size; w += 8) {
+        for (int v = 0; v < 6; v++) {
+            memcpy(buf, ref, size);
+            memcpy(buf + w, &values[v], 8);
+            if (!memcmp(buf, ref, size)) continue;  /* the word had that value already */
+            long b = n_problems(env);
+            fmi2Status st = fmi2DeSerializeFMUstate(c, buf, size, &s);
+            atomic_fetch_add(&g_bad_inputs, 1);
+            if (st != fmi2OK) {
+                EXPECT(st == fmi2Error && n_problems(env) > b, "word %zu = %g: status %d without a message", w / 8,
+                       values[v], st);
+                atomic_fetch_add(&g_outcome[st], 1);
+                outcome[0]++;
+                continue;
+            }
+            st = fmi2SetFMUstate(c, s);
+            if (st != fmi2OK) {
+                EXPECT(st == fmi2Error && n_problems(env) > b, "word %zu = %g: set status %d without a message",
+                       w / 8, values[v], st);
+                atomic_fetch_add(&g_outcome[st], 1);
+                outcome[1]++;
+            } else {
+                fmi2Real t = -1, t2 = -1;
+                fmi2GetRealStatus(c, fmi2LastSuccessfulTime, &t);
+                EXPECT(fabs(t - 0.01) < 1e-12, "word %zu = %g: the state set is at t = %.17g", w / 8, values[v], t);
+                st = fmi2DoStep(c, t, 1e-4, fmi2True);
+                atomic_fetch_add(&g_outcome[st], 1);
+                EXPECT(st == fmi2OK || st == fmi2Discard, "word %zu = %g: step status %d", w / 8, values[v], st);
+                if (st == fmi2OK) {
+                    fmi2GetRealStatus(c, fmi2LastSuccessfulTime, &t2);
+                    EXPECT(t2 == t + 1e-4, "word %zu = %g: stepped to %.17g, not %.17g", w / 8, values[v], t2, t + 1e-4);
+                }
+                outcome[st == fmi2OK ? 2 : 3]++;
+            }
+            CALL(fmi2OK, fmi2SetFMUstate(c, good));
+        }
+    }
+    printf("fieldwise states: %zu words x 6 values; refused at deserialize %ld, at set %ld; "
+           "stepped %ld, discarded %ld\n", size / 8, outcome[0], outcome[1], outcome[2], outcome[3]);
+    CALL(fmi2OK, fmi2FreeFMUstate(c, &good));
+    CALL(fmi2OK, fmi2FreeFMUstate(c, &s));
+    fmi2FreeInstance(c);
+    free(ref);
+    free(buf);
+}
+
 /* --- threads ---------------------------------------------------------------------- */
 
 typedef struct {
@@ -512,11 +582,11 @@ static void threads(const Opts *o, int n) {
 int main(int argc, char **argv) {
     if (argc < 2) {
         fprintf(stderr, "usage: %s RESOURCE_URI [--cycles N] [--stop T] [--step H] [--threads K] "
-                        "[--corrupt R] [--seed S] [--verbose]\n", argv[0]);
+                        "[--corrupt R] [--fieldwise] [--seed S] [--verbose]\n", argv[0]);
         return 2;
     }
     Opts o = {argv[1], 0.05, 0.01, "", 0};
-    int cycles = 0, n_threads = 0, corrupt = 0;
+    int cycles = 0, n_threads = 0, corrupt = 0, fieldwise = 0;
     for (int i = 2; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : "0";
         if (!strcmp(a, "--cycles")) cycles = atoi(v), i++;
@@ -526,6 +596,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--corrupt")) corrupt = atoi(v), i++;
         else if (!strcmp(a, "--seed")) rng_state ^= strtoull(v, NULL, 10) * 0x9E3779B97F4A7C15ULL, i++;
         else if (!strcmp(a, "--verbose")) o.verbose = 1;
+        else if (!strcmp(a, "--fieldwise")) fieldwise = 1;
         else {
             fprintf(stderr, "unknown argument %s\n", a);
             return 2;
@@ -560,6 +631,7 @@ int main(int argc, char **argv) {
     if (cycles >= 45) printf("error paths: all 9 kinds run %d times or more\n", cycles / 45);
     if (n_threads > 0) threads(&o, n_threads);
     if (corrupt > 0) corrupt_states(&env, &o, corrupt);
+    if (fieldwise) fieldwise_states(&env, &o);
 
     unlink(p1);
     unlink(p2);
