@@ -190,7 +190,7 @@ CALLS = {
     "fmi2ExitInitializationMode": (lambda s: s.call("exitInitializationMode"), {"init"}),
     "fmi2DoStep": (lambda s: s.call("doStep", 0.0, STEP), {"step"}),
     "fmi2Terminate": (lambda s: s.call("terminate"), {"init", "step", "failed"}),
-    "fmi2SetReal(fixed parameter)": (lambda s: s.set("contact.e_JA", 0.6), {"instantiated", "init"}),
+    "fmi2SetReal(fixed parameter)": (lambda s: s.set("chain.pretension", 0.02), {"instantiated", "init"}),
     "fmi2SetReal(tunable parameter)": (lambda s: s.set("drive.Kp", 450.0), {"instantiated", "init", "step"}),
     "fmi2SetReal(input)": (lambda s: s.set("drive.v_ref", 1.9), {"instantiated", "init", "step"}),
     "fmi2SetString(layout.name)": (lambda s: s.set("layout.name", "demo"), {"instantiated", "init"}),
@@ -229,7 +229,7 @@ def test_wrong_call_changes_nothing():
         assert "currentCommunicationPoint" in s.last_error()
         assert s.call("setupExperiment", None, 0.0) == ERROR
         assert s.call("enterInitializationMode") == ERROR
-        assert s.set("contact.e_JA", 0.9) == ERROR
+        assert s.set("chain.pretension", 0.05) == ERROR     # a fixed parameter in Step Mode
         assert s.set("chain.v_mean", 3.0) == ERROR
         assert np.array_equal(run(s, 0.05, STEP, outs), ref)
 
