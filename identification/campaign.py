@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,9 @@ class Task:
     free: Optional[tuple]
     tare: bool = False   # take out zero errors within the transducer's declared offset (from_measurement)
     restarts: int = 0    # identify(restarts=...)
+    presolve: int = 0    # identify(presolve=...): the layout-dependent variables first
+    refine_evals: int = 0   # identify(refine_evals=...): Levenberg-Marquardt after the complex
+    uncertainty: bool = False   # identify(uncertainty=...): an interval per free variable
 
     @property
     def key(self) -> str:
@@ -59,12 +63,15 @@ def run_task(task: Task) -> dict:
     problem = from_measurement(meas, task.model, free=task.free, window=task.window, settle=task.settle,
                                tare=task.tare)
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
+    c0 = time.process_time()
     try:
         res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path,
-                       progress=False, restarts=task.restarts)
+                       progress=False, restarts=task.restarts, presolve=task.presolve,
+                       refine_evals=task.refine_evals, uncertainty=task.uncertainty)
     finally:
         problem.sim.close()
     out = res.to_dict()
+    out["cpu_s"] = time.process_time() - c0   # this run's (a resumed one: the rest of it)
     out.update({"wheel_type": meas.meta.get("wheel_type"), "coupling_type": meas.meta.get("coupling_type"),
                 "number": meas.meta.get("number"), "measurement_dir": str(task.measurement)})
     write_json_atomic(task.result_path, out)
@@ -74,7 +81,8 @@ def run_task(task: Task) -> dict:
 def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: int = 2,
                  scheduler: Optional[str] = None, max_evals: int = 5000, seed: int = 0,
                  window: Optional[float] = None, settle: Optional[float] = None, free: Optional[tuple] = None,
-                 progress: bool = True, client=None, tare: bool = False, restarts: int = 0) -> list[dict]:
+                 progress: bool = True, client=None, tare: bool = False, restarts: int = 0, presolve: int = 0,
+                 refine_evals: int = 0, uncertainty: bool = False) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
     from lss_fmu.design import parse_model
     from lss_fmu.measurement import find_measurements
@@ -86,8 +94,8 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
     folders = find_measurements(data_dir)
     if not folders:
         raise FileNotFoundError(f"{data_dir} holds no measurement (no meta.json in it or below)")
-    tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts))
-             for p in folders for m in models]
+    tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts), int(presolve),
+                  int(refine_evals), bool(uncertainty)) for p in folders for m in models]
     twice = sorted({t.key for t in tasks if sum(u.key == t.key for u in tasks) > 1})
     if twice:  # results are filed by folder name
         raise ValueError(f"{data_dir}: measurement folders share a name ({', '.join(twice[:5])}); a campaign "
@@ -95,7 +103,8 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
     write_json_atomic(out / "campaign.json", {"data_dir": str(data_dir), "models": list(models),
                                               "max_evals": max_evals, "seed": seed, "window": window,
                                               "settle": settle, "free": list(free) if free else None,
-                                              "tare": tare, "restarts": int(restarts),
+                                              "tare": tare, "restarts": int(restarts), "presolve": int(presolve),
+                                              "refine_evals": int(refine_evals), "uncertainty": bool(uncertainty),
                                               "tasks": [t.key for t in tasks]})
     todo = [t for t in tasks if not t.result_path.exists()]
     bar = None

@@ -15,7 +15,9 @@ and a serial run from the same seed give the same history, figure and JSON.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
+import logging
 import os
 import time
 from dataclasses import dataclass
@@ -30,6 +32,9 @@ from lss_fmu.variables import FORCE_CHANNELS
 
 from .optim_result import ComplexResult, jsonable
 from .problem import IdentificationProblem
+
+
+log = logging.getLogger(__name__)
 
 
 def _key(x) -> str:
@@ -145,6 +150,9 @@ class IdentificationResult:
     workers: int = 1
     optimizer: Optional[ComplexResult] = None  # the (last) optimiser run's result, with its full history
     restarts: int = 0                # restarts made (see identify)
+    refined: Optional[dict] = None   # the local refinement: f before and after, simulations
+    presolved: Optional[dict] = None  # the first stage (identify(presolve=...)): f0, f, evaluations, values
+    intervals: Optional[list] = None  # identification.uncertainty.Interval per free variable
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -162,17 +170,24 @@ class IdentificationResult:
             "nfev_total": self.nfev_total, "discarded": self.nfev_total - self.nfev,
             "rounds": self.nrounds, "workers": self.workers, "restarts": self.restarts,
             "seconds": self.seconds, "window_s": float(p.times[-1]),
+            "protocol": p.protocol.to_meta(), "tolerance": p.tolerance,
+            "refined": self.refined, "presolved": self.presolved,
+            "interval": None if self.intervals is None else {
+                symbol(iv.name): iv.to_dict() for iv in self.intervals},
         }
 
 
+REFINE_STEP = 0.01     # the refinement's difference step, of each bound range: well above the solver's error
 RESTART_WIDTH = 0.15   # half-width of a restart's box, as a share of each variable's bound range
 
 
 def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
              journal: Optional[Path] = None, progress: bool = True, f_tol: float = 1e-6,
-             x_tol: float = 1e-4, workers: int = 1, restarts: int = 0) -> IdentificationResult:
+             x_tol: float = 1e-4, workers: int = 1, restarts: int = 0, refine_evals: int = 0,
+             uncertainty: bool = False, presolve: int = 0) -> IdentificationResult:
     """Complex-RF on the problem (the parallel variant with `workers` > 1,
-    each worker process with its own FMU instance).
+    each worker process with its own FMU instance), then optionally a local
+    refinement and the intervals of the result.
 
     `restarts`: when the complex has converged (function or parameter spread)
     before `max_evals`, start a new complex in a box of +-RESTART_WIDTH of the
@@ -182,6 +197,24 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
     20x the noise floor); a fresh, smaller complex picks the descent up again.
     0 is the method as published.
 
+    `presolve`: evaluations of a first complex in which only the
+    layout-dependent variables (speed, pretension, rolling resistance,
+    trigger, gains) are free, the CoRs held at their start values; the main
+    complex then starts from its best point. Those variables move the
+    objective tens of times more than the CoRs do (they set the force
+    levels and the speed history; the CoRs shape oscillations on top), so a
+    complex with all ten free first spends itself on them and contracts
+    with the CoRs where they happened to be. 0: none.
+
+    `refine_evals`: after the complex, Levenberg-Marquardt on the objective's
+    own residual from its best point (identification.refine), at most this
+    many simulations on top of `max_evals`: the complex finds the basin and
+    contracts before its bottom; on a smooth objective (a transient record at
+    tolerance 1e-6) a few Gauss-Newton steps reach it. `uncertainty`: an
+    interval for every free variable at the result (identification.uncertainty,
+    2 simulations per variable). Both are kept beside the journal and taken
+    from there on a resume.
+
     `nfev` and `history_f` count the evaluations the method used (`max_evals`
     limits them, over all restarts); with workers, `nfev_total` adds the
     speculative ones it discarded. An exception of the objective, in this
@@ -190,6 +223,9 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
     if int(restarts) < 0:
         raise ValueError(f"restarts = {restarts}: must be >= 0")
     t0 = time.time()
+    pre = _presolve(problem, presolve, seed, journal, progress, f_tol, x_tol, workers)
+    if pre is not None:
+        problem = dataclasses.replace(problem, x0={**(problem.x0 or {}), **pre.problem.values(pre.x)})
     jr = Journal(journal)
     x0 = problem.x0_vector()
     if x0 is None:
@@ -216,15 +252,82 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
         history_f = np.concatenate([np.asarray(q.history.f, float)[q.history.used_order()] for q in runs])
         f0 = float(history_f[0])  # x0 is the first point of the initial complex
         H0 = _safe_H(problem, x0)
-        H = _safe_H(problem, best.x)
+        x_best, f_best = np.asarray(best.x, float), float(best.fun)
+        local = _local(problem, x_best, f_best, refine_evals, uncertainty, journal)
+        if local.get("f", np.inf) < f_best:
+            x_best, f_best = np.asarray(local["x"], float), float(local["f"])
+        H = _safe_H(problem, x_best)
     finally:
         jr.close()
     message = last.message if len(runs) == 1 else f"{last.message} (after {len(runs) - 1} restarts)"
-    return IdentificationResult(problem, x0, f0, H0, np.asarray(best.x), float(best.fun), H,
+    if local.get("refined"):
+        message += f"; refined to f = {f_best:.4g} in {local['refined']['nfev']} simulations"
+    return IdentificationResult(problem, x0, f0, H0, x_best, f_best, H,
                                 int(sum(q.nfev_used for q in runs)), evaluated, jr.replayed, message, history_f,
                                 time.time() - t0, iterations=_joined_iterations(runs),
                                 nfev_total=int(sum(q.nfev for q in runs)), nrounds=int(sum(q.nrounds for q in runs)),
-                                workers=max(1, int(workers)), optimizer=last, restarts=len(runs) - 1)
+                                workers=max(1, int(workers)), optimizer=last, restarts=len(runs) - 1,
+                                refined=local.get("refined"), intervals=local.get("intervals"),
+                                presolved=None if pre is None else {
+                                    "f0": pre.f0, "f": pre.f, "nfev": pre.nfev,
+                                    "x": dict(zip(pre.problem.free, map(float, pre.x)))})
+
+
+def _presolve(problem, evals: int, seed, journal, progress, f_tol, x_tol, workers):
+    """The first stage of `identify(presolve=...)`: the layout-dependent
+    variables alone (journal: JOURNAL.presolve.jsonl). None when there is
+    nothing to do: no budget, or no CoR and no other variable free."""
+    from lss_fmu.design import LAYOUT_DEPENDENT
+    free = tuple(n for n in problem.free if n in LAYOUT_DEPENDENT)
+    if evals <= 0 or not free or len(free) == len(problem.free):
+        return None
+    stage = dataclasses.replace(problem, free=free)
+    side = Path(journal).with_suffix(".presolve.jsonl") if journal else None
+    return identify(stage, max_evals=evals, seed=[seed, 1000] if isinstance(seed, int) else seed, journal=side,
+                    progress=progress, f_tol=f_tol, x_tol=x_tol, workers=workers)
+
+
+def _local(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path]) -> dict:
+    """The refinement and the intervals after the complex, kept in
+    JOURNAL.local.json (atomically) for the resume of an interrupted run."""
+    from lss_fmu.atomic import write_json_atomic
+
+    from .refine import refine
+    from .uncertainty import Interval, intervals
+    if refine_evals <= 0 and not uncertainty:
+        return {}
+    side = Path(journal).with_suffix(".local.json") if journal else None
+    key = {"start": _key(x), "refine_evals": int(refine_evals), "uncertainty": bool(uncertainty)}
+    if side is not None and side.exists():
+        try:
+            kept = json.loads(side.read_text())
+            if kept.get("key") == key:
+                out = dict(kept["result"])
+                if out.get("intervals") is not None:
+                    out["intervals"] = [Interval(**{**iv, "sd": float("inf") if iv.get("sd") is None else iv["sd"]})
+                                        for iv in out["intervals"]]
+                return out
+        except (ValueError, KeyError, TypeError):
+            pass  # unreadable: computed again
+    out, sim = {}, None
+    if refine_evals > 0:
+        ref = refine(problem, x, max_evals=int(refine_evals), rel_step=REFINE_STEP, f_rtol=1e-4, central=True)
+        out["refined"] = {"f_start": float(f), "f": float(ref.f), "nfev": int(ref.nfev),
+                          "iterations": int(ref.iterations)}
+        if ref.f < f:
+            out["x"], out["f"], sim = ref.x.tolist(), float(ref.f), ref.sim
+            x = ref.x
+    if uncertainty:
+        try:
+            out["intervals"] = intervals(problem, x, sim)
+        except Exception as exc:  # no intervals rather than no result
+            log.warning("%s: intervals failed: %s", problem.name, exc)
+    if side is not None:
+        kept = dict(out)
+        if kept.get("intervals") is not None:
+            kept["intervals"] = [{"name": iv.name, **iv.to_dict()} for iv in kept["intervals"]]
+        write_json_atomic(side, {"key": key, "result": jsonable(kept)})
+    return out
 
 
 def _complex_run(problem, jr: Journal, bounds, x0, budget: int, seed, progress: bool, f_tol: float,

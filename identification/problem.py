@@ -25,6 +25,7 @@ from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS
 
 log = logging.getLogger(__name__)
 
+OBJECTIVES = ("pointwise", "statistics")
 BAD_VALUE = 100.0  # worse than any simulation that ran (7 channels at NRMSD ~3.8)
 
 
@@ -63,9 +64,12 @@ class IdentificationProblem:
     sample_rate: Optional[float] = None  # Hz; None: read off the times (triggered.sample_rate_of)
     protocol: Protocol = field(default_factory=Protocol)  # what the sorter did (lss_fmu.protocol)
     v_nominal: Optional[float] = None    # the record's nominal set point (scales a speed-step's v_from)
+    objective: str = "pointwise"         # pointwise: Eq. 10-12; statistics: spectra and distributions (features)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
 
     def __post_init__(self):
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"unknown objective {self.objective!r}: use {' or '.join(OBJECTIVES)}")
         if self.model not in CONTACT_MODELS:
             raise ValueError(f"unknown contact model {self.model!r}: use one of {', '.join(CONTACT_MODELS)}")
         self.samples = np.asarray(self.samples, float)
@@ -191,6 +195,11 @@ class IdentificationProblem:
         return {n: sim.get(n) for n in names}
 
     def channel_errors(self, x: Sequence[float]) -> np.ndarray:
+        """H_j per channel: Eq. 11-12 (pointwise), or the statistical H_j^stat
+        of identification.features (objective = "statistics")."""
+        if self.objective == "statistics":
+            from .features import stat_errors
+            return stat_errors(self.samples, self.simulate(x), self.rate, self.tare)
         return nrmsd(self.samples, self.simulate(x), self.tare)
 
     def __call__(self, x: Sequence[float]) -> float:
@@ -210,7 +219,7 @@ class IdentificationProblem:
 def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, window: Optional[float] = None,
                      fixed: Optional[Mapping[str, object]] = None, settle: Optional[float] = None,
                      tolerance: Optional[float] = None, tare: bool = False,
-                     sim: Optional[LazySimulator] = None) -> IdentificationProblem:
+                     sim: Optional[LazySimulator] = None, objective: str = "pointwise") -> IdentificationProblem:
     """The problem of one loaded measurement (lss_fmu.measurement.Measurement):
     bounds of the layout-dependent variables from its metadata, CoRs 0.2..0.9,
     starting at the nominal values and the middle of the CoR range, following
@@ -261,7 +270,7 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
                                  name=meas.id, tare=tol, anti_alias=aa, sample_rate=meas.sample_rate,
-                                 protocol=protocol, v_nominal=float(meas.meta["speed_nominal"]),
+                                 protocol=protocol, v_nominal=float(meas.meta["speed_nominal"]), objective=objective,
                                  sim=sim or LazySimulator())
 
 

@@ -21,6 +21,10 @@ def register(sub, common) -> None:
     ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")
+    ap.add_argument("--presolve", type=int, default=0,
+                    help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
+    ap.add_argument("--refine-evals", type=int, default=0,
+                    help="simulations of the local refinement after the complex (0: none)")
     ap.add_argument("--tare", action="store_true",
                     help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
@@ -39,7 +43,8 @@ def run_campaign(args) -> int:
     results = campaign(Path(args.data_dir), models, Path(args.out), workers=args.workers,
                        scheduler=args.scheduler, max_evals=args.max_evals, seed=args.seed,
                        window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
-                       tare=args.tare, restarts=args.restarts)
+                       tare=args.tare, restarts=args.restarts, presolve=args.presolve,
+                       refine_evals=args.refine_evals, uncertainty=True)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

@@ -6,6 +6,9 @@ import logging
 from pathlib import Path
 
 
+REFINE_EVALS = 100   # Levenberg-Marquardt after the complex (identification.identify)
+
+
 def register(sub, common) -> None:
     ap = sub.add_parser("identify", parents=[common], help="identify one measurement",
                         description="Identify one measurement with Complex-RF.")
@@ -20,6 +23,10 @@ def register(sub, common) -> None:
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")
+    ap.add_argument("--presolve", type=int, default=0,
+                    help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
+    ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
+                    help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
     ap.add_argument("--tare", action="store_true",
                     help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
@@ -30,7 +37,7 @@ def run(args) -> int:
     from identification.identify import identify
     from identification.problem import from_measurement
     from lss_fmu.atomic import write_json_atomic
-    from lss_fmu.design import parse_free, parse_model, symbol
+    from lss_fmu.design import parse_free, parse_model
     from lss_fmu.measurement import load_measurement
 
     from .figures.identification import forces_overlay, history, nrmsd_bars
@@ -39,6 +46,8 @@ def run(args) -> int:
         raise ValueError(f"--restarts {args.restarts}: must be 0 or more")
     if args.max_evals < 1:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
+    if args.refine_evals < 0:
+        raise ValueError(f"--refine-evals {args.refine_evals}: must be 0 or more")
     model = parse_model(args.model)
     meas = load_measurement(args.measurement)
     problem = from_measurement(meas, model, free=parse_free(args.free), window=args.window, tare=args.tare)
@@ -47,7 +56,8 @@ def run(args) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "identify.log"))
     res = identify(problem, max_evals=args.max_evals, seed=args.seed, journal=out / "journal.jsonl",
-                   progress=not args.no_progress, workers=args.workers, restarts=args.restarts)
+                   progress=not args.no_progress, workers=args.workers, restarts=args.restarts,
+                   refine_evals=args.refine_evals, uncertainty=True, presolve=args.presolve)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{meas.id}, model {model}"
     try:
@@ -59,8 +69,9 @@ def run(args) -> int:
     forces_overlay(problem.times, problem.samples, initial, optimum, out / "forces", title)
     history(res.history_f, out / "history", title)
     nrmsd_bars(res.H0, res.H, out / "nrmsd", title)
-    vals = ", ".join(f"{symbol(k)}={v:.4g}" for k, v in zip(problem.free, res.x))
-    print(f"{meas.id} {model}: f {res.f0:.4g} -> {res.f:.4g} after {res.nfev} evaluations "
-          f"({res.replayed} from the journal; {res.message}); {vals}")
+    print(f"{meas.id} {model} ({problem.protocol.name}): f {res.f0:.4g} -> {res.f:.4g} after {res.nfev} "
+          f"evaluations ({res.replayed} from the journal; {res.message})")
+    for iv in res.intervals or []:
+        print(f"  {iv}")
     print(f"wrote {out / 'result.json'} and figures forces/history/nrmsd (.png, .svg)")
     return 0

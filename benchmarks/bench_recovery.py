@@ -1,0 +1,152 @@
+#!/usr/bin/env python3
+"""Recovery of the true CoRs from the recovery set, per protocol (issue 17).
+
+For each protocol: the 22 recovery measurements of the virtual transducer
+cart (`lss rig --set recovery --protocol P`, LW truth with Table 3's CoRs),
+each identified with LW and the paper's ten design variables free through
+`lss campaign` (local processes, resumable), then compared with the answer
+files: |identified - true| per CoR, f / f(truth) (f(truth): the problem's
+objective at the true values, what noise and offsets leave), the interval
+of each CoR and whether it holds the truth, CPU time.
+
+    .venv/bin/python benchmarks/bench_recovery.py --protocols start-up --measurements 1-22 \\
+        --max-evals 600 --presolve 200 --refine-evals 160 --window 2.5 \\
+        --json benchmarks/results/recovery_start-up.json
+
+Everything is kept under --work: the sets, the campaign's results and
+journals; stopped and started again it resumes where it was.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from identification.campaign import run_campaign  # noqa: E402
+from identification.problem import from_measurement  # noqa: E402
+from lss_fmu.atomic import write_json_atomic  # noqa: E402
+from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
+from lss_fmu.measurement import load_measurement  # noqa: E402
+from lss_fmu.rig import generate_set, load_truth, parse_numbers  # noqa: E402
+
+TARGET = {"e_JA": 0.03, "e_SW": 0.03, "e_RW": 0.03, "e_JR": 0.05}
+
+
+def _truth_x(truth: dict, free) -> np.ndarray:
+    vals = {**{f"contact.{k}": v for k, v in truth["cor"].items()},
+            **{n: truth["design_variables"][SYMBOL[n]] for n in DESIGN[4:]}}
+    return np.array([vals[n] for n in free])
+
+
+def f_truth(meas_dir: Path, window, tare: bool) -> float:
+    """The objective at the true values (the floor the identification can reach)."""
+    m = load_measurement(meas_dir)
+    p = from_measurement(m, "LW", window=window, tare=tare)
+    try:
+        return float(p(_truth_x(load_truth(m), p.free)))
+    finally:
+        p.sim.close()
+
+
+def rows_of(results: list, data: Path, window, tare: bool, cache: dict) -> list:
+    rows = []
+    for r in results:
+        meas_dir = Path(r["measurement_dir"])
+        truth = load_truth(meas_dir)
+        key = r["measurement"]
+        if key not in cache:
+            cache[key] = f_truth(meas_dir, window, tare)
+        row = {"measurement": key, "number": r.get("number"), "layout": r.get("layout"), "f": r["f"],
+               "f_truth": cache[key], "ratio": r["f"] / cache[key] if cache[key] > 0 else float("nan"),
+               "cpu_s": r.get("cpu_s"), "nfev": r["nfev"], "refined": r.get("refined"),
+               "protocol": (r.get("protocol") or {}).get("name", "steady")}
+        for k in CORS:
+            s = SYMBOL[k]
+            true = truth["cor"][s]
+            got = r["values"][s]
+            iv = (r.get("interval") or {}).get(s) or {}
+            row[s] = {"true": true, "identified": got, "error": got - true, "interval": iv,
+                      "covers": bool(iv) and iv.get("lower", np.inf) <= true <= iv.get("upper", -np.inf),
+                      "identifiable": iv.get("identifiable")}
+        rows.append(row)
+    return sorted(rows, key=lambda q: q["number"] or 0)
+
+
+def summary(rows: list) -> dict:
+    out = {"n": len(rows), "ratio_median": float(np.median([q["ratio"] for q in rows])) if rows else None,
+           "within_2x": int(sum(q["ratio"] <= 2.0 for q in rows)),
+           "cpu_s_total": float(sum(q["cpu_s"] or 0.0 for q in rows))}
+    for s, tol in TARGET.items():
+        out[s] = {"within": int(sum(abs(q[s]["error"]) <= tol for q in rows)), "tolerance": tol,
+                  "not_identifiable": int(sum(q[s]["identifiable"] is False for q in rows)),
+                  "interval_covers": int(sum(q[s]["covers"] for q in rows)),
+                  "median_abs_error": float(np.median([abs(q[s]["error"]) for q in rows])) if rows else None}
+    return out
+
+
+def table(rows: list) -> str:
+    head = ("| meas | layout | f / f(truth) | e_JA err | e_SW err | e_RW err | e_JR err | intervals cover "
+            "(JA/SW/RW) | CPU s |")
+    lines = [head, "|" + "---|" * 10]
+    for q in rows:
+        def cell(s):
+            e = q[s]["error"]
+            mark = "" if q[s]["identifiable"] is not False else " (n.i.)"
+            return f"{e:+.3f}{mark}"
+        cov = "/".join("y" if q[s]["covers"] else "n" for s in ("e_JA", "e_SW", "e_RW"))
+        lines.append(f"| {q['number']} | {q['layout']} | {q['ratio']:.2f} | {cell('e_JA')} | {cell('e_SW')} | "
+                     f"{cell('e_RW')} | {cell('e_JR')} | {cov} | {q['cpu_s'] or 0:.0f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", default="build/bench_recovery")
+    ap.add_argument("--protocols", default="start-up")
+    ap.add_argument("--measurements", default="1-22")
+    ap.add_argument("--max-evals", type=int, default=600)
+    ap.add_argument("--presolve", type=int, default=200)
+    ap.add_argument("--refine-evals", type=int, default=160)
+    ap.add_argument("--window", type=float, default=None)
+    ap.add_argument("--no-tare", action="store_true")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+    numbers = parse_numbers(args.measurements)
+    tare = not args.no_tare
+    report = {"command": " ".join(sys.argv), "settings": vars(args), "protocols": {}}
+    if args.json and Path(args.json).exists():
+        report = {**json.loads(Path(args.json).read_text()), "command": report["command"],
+                  "settings": report["settings"]}
+    for protocol in [p.strip() for p in args.protocols.split(",") if p.strip()]:
+        base = Path(args.work) / protocol
+        data, out = base / "data", base / "campaign"
+        t0, c0 = time.time(), time.process_time()
+        gen = generate_set("recovery", data, numbers, workers=args.workers, protocol=protocol, progress=True,
+                           log=lambda msg: print(msg, file=sys.stderr))
+        gen_cpu = sum(r.get("cpu_s", 0.0) for r in gen if "cpu_s" in r)
+        # the campaign takes every measurement in the set's folder: the ones generated (--measurements)
+        results = run_campaign(data, ["LW"], out, workers=args.workers, max_evals=args.max_evals, seed=args.seed,
+                               window=args.window, tare=tare, presolve=args.presolve,
+                               refine_evals=args.refine_evals, uncertainty=True, progress=True)
+        cache = (report["protocols"].get(protocol) or {}).get("f_truth", {})
+        results = [r for r in results if r.get("number") in numbers]
+        rows = rows_of(results, data, args.window, tare, cache)
+        entry = {"rows": rows, "summary": summary(rows), "f_truth": cache, "wall_s": time.time() - t0,
+                 "cpu_s_this_session": time.process_time() - c0, "generation_cpu_s": gen_cpu}
+        report["protocols"][protocol] = entry
+        print(f"\n## {protocol}\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
+        if args.json:
+            write_json_atomic(args.json, report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,143 @@
+"""What an identified value is worth: an interval for every free variable.
+
+At the optimum x* the residual r = measured - simulated is linearised in the
+free variables, J = d sim / d x by central differences through the FMU
+(one-sided at a bound). Each channel j carries its own noise sigma_j,
+estimated from the residual at x* (sensor noise and what the model still
+misses alike), and its own correlation: a residual whose neighbouring
+samples are correlated (lag-1 coefficient rho_j) holds fewer independent
+samples, n (1 - rho_j) / (1 + rho_j). The covariance of the estimate is
+(J' W J)^-1 with W = diag(1 / sigma_j^2) reduced by that factor, the
+interval the estimate +- 1.96 standard deviations (about 95 %) clipped to
+the bounds. A variable is *not identifiable* when that interval is wider
+than IDENTIFIABLE_WIDTH of its bound range: the record leaves it anywhere
+in a large part of what it may be (the profile of such a variable is flat
+within the noise). Nor is a variable in which the simulation is not smooth:
+where the forward and the backward difference disagree (ROUGH of their
+mean or more, in the objective's metric) the record is chaotic in that
+variable (steady running, docs/identification.md), the linearisation means
+nothing, and no interval is claimed.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+from lss_fmu.design import symbol
+
+from .problem import IdentificationProblem, tared
+
+log = logging.getLogger(__name__)
+
+Z95 = 1.959964                 # two-sided 95 % quantile of the normal distribution
+IDENTIFIABLE_WIDTH = 0.4       # of the bound range: a wider 95 % interval is "not identifiable"
+REL_STEP = 0.01                # difference step, of the bound range: the response to it stands well
+                               # above the solver's error at tolerance 1e-6 (docs/identification.md)
+ROUGH = 0.5                    # |forward - backward| / |their mean| at or above which a variable is not smooth
+
+
+@dataclass
+class Interval:
+    name: str
+    value: float
+    sd: float
+    lower: float
+    upper: float
+    identifiable: bool
+    method: str = "jacobian"
+    smooth: bool = True            # the simulation is smooth in this variable (forward ~ backward difference)
+
+    def to_dict(self) -> dict:
+        return {"value": self.value, "sd": self.sd, "lower": self.lower, "upper": self.upper,
+                "identifiable": self.identifiable, "method": self.method, "smooth": self.smooth}
+
+    def __str__(self) -> str:
+        if not self.smooth:
+            return f"{symbol(self.name)}: not identifiable ({self.value:.4g}; the record is chaotic in it)"
+        if not self.identifiable:
+            return f"{symbol(self.name)}: not identifiable ({self.value:.4g}, 95 % [{self.lower:.4g}, {self.upper:.4g}])"
+        return f"{symbol(self.name)} = {self.value:.4g} [{self.lower:.4g}, {self.upper:.4g}]"
+
+
+def _effective_samples(r: np.ndarray) -> np.ndarray:
+    """n (1 - rho) / (1 + rho) per channel, rho the lag-1 autocorrelation (>= 0)."""
+    n = r.shape[0]
+    rc = r - r.mean(axis=0)
+    den = np.sum(rc ** 2, axis=0)
+    rho = np.where(den > 0, np.sum(rc[1:] * rc[:-1], axis=0) / np.where(den > 0, den, 1.0), 0.0)
+    rho = np.clip(rho, 0.0, 0.99)
+    return n * (1 - rho) / (1 + rho)
+
+
+def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
+             rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None) -> tuple:
+    """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
+    each column): central differences inside the bounds, one-sided at a bound;
+    the roughness is |forward - backward| / |their mean| in the metric
+    `weights` per channel (at a bound: of two successive steps inwards); a failed run leaves a zero
+    column and an infinite roughness."""
+    lo, hi = np.array(problem.bounds_array, float).T
+    wt = np.ones(sim0.shape[1]) if weights is None else np.asarray(weights, float)
+    J = np.zeros(sim0.shape + (len(x),))
+    steps = np.zeros(len(x))
+    rough = np.zeros(len(x))
+
+    def norm(a):
+        return float(np.sqrt(np.sum(a ** 2 * wt)))
+    for k in range(len(x)):
+        h = rel_step * (hi[k] - lo[k])
+        up, down = x[k] + h <= hi[k], x[k] - h >= lo[k]
+        try:
+            xp, xm = np.array(x, float), np.array(x, float)
+            if up and down:
+                xp[k] += h
+                xm[k] -= h
+                fwd = (problem.simulate(xp) - sim0) / h
+                bwd = (sim0 - problem.simulate(xm)) / h
+                J[:, :, k] = 0.5 * (fwd + bwd)
+                m = norm(J[:, :, k])
+                rough[k] = norm(fwd - bwd) / m if m > 0 else np.inf
+            else:  # at a bound: two steps inwards, their differences compared
+                sgn = 1.0 if up else -1.0
+                xp[k] += sgn * h
+                xm[k] += 2 * sgn * h
+                y1 = problem.simulate(xp)
+                d1, d2 = sgn * (y1 - sim0) / h, sgn * (problem.simulate(xm) - y1) / h
+                J[:, :, k] = d1
+                m = norm(0.5 * (d1 + d2))
+                rough[k] = norm(d1 - d2) / m if m > 0 else np.inf
+            steps[k] = h
+        except Exception as exc:  # the variable then counts as not identifiable
+            log.warning("jacobian column %s failed: %s", problem.free[k], exc)
+            rough[k] = np.inf
+    return J, steps, rough
+
+
+def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[np.ndarray] = None,
+              rel_step: float = REL_STEP) -> list:
+    """One Interval per free variable of the problem at x (about 2 simulations per variable)."""
+    x = np.asarray(x, float)
+    sim0 = problem.simulate(x) if sim is None else np.asarray(sim, float)
+    r = tared(problem.samples - sim0, problem.tare)
+    sigma2 = np.maximum(np.mean(r ** 2, axis=0), 1e-30)
+    J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2)
+    if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
+        demean = np.abs((problem.samples - sim0).mean(axis=0)) <= problem.tare
+        J[:, demean, :] -= J[:, demean, :].mean(axis=0)
+    n_eff = _effective_samples(r)
+    w = (n_eff / r.shape[0]) / sigma2                          # per channel
+    F = np.einsum("tjk,j,tjl->kl", J, w, J)
+    lo, hi = np.array(problem.bounds_array, float).T
+    cov = np.linalg.pinv(F, rcond=1e-12)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sd = np.where((steps > 0) & (np.diag(F) > 0), sd, np.inf)
+    out = []
+    for k, name in enumerate(problem.free):
+        a, b = max(lo[k], x[k] - Z95 * sd[k]), min(hi[k], x[k] + Z95 * sd[k])
+        smooth = bool(rough[k] < ROUGH)
+        ok = bool(smooth and np.isfinite(sd[k]) and (b - a) <= IDENTIFIABLE_WIDTH * (hi[k] - lo[k]))
+        out.append(Interval(name, float(x[k]), float(sd[k]), float(a), float(b), ok, smooth=smooth))
+    return out
