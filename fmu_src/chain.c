@@ -2,7 +2,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "chain_simd.h"
 
 #define GRAVITY 9.81
 
@@ -56,6 +56,16 @@ int chain_check_params(const LSSParams *p, char *err, size_t errlen) {
     if (!(p->solver_h_max >= 1e-6 && p->solver_h_max <= 1.0))
         return bad(err, errlen, "solver.h_max", p->solver_h_max,
                    "must lie in [1e-6, 1] s (a smaller step would stall the solver)");
+    if (p->solver_vector_path < 0 || p->solver_vector_path > 3) {
+        snprintf(err, errlen, "solver.vector_path = %d is invalid: use 0 auto, 1 scalar, 2 AVX2 or 3 AVX-512",
+                 p->solver_vector_path);
+        return 1;
+    }
+    if (p->solver_method < 0 || p->solver_method > 1) {
+        snprintf(err, errlen, "solver.method = %d is invalid: use 0 Dormand-Prince 5(4) or 1 DOP853",
+                 p->solver_method);
+        return 1;
+    }
     return effects_check_params(p, err, errlen);
 }
 
@@ -124,6 +134,7 @@ static int allocate(Chain *c) {
 void chain_free(Chain *c) {
     if (!c) return;
     LSSAlloc a = c->m.alloc;
+    chain_simd_free(c);
     void *ptrs[] = {c->st.y, c->st.s_hint, c->st.v_onset, c->st.delta_prev, c->st.ddelta_prev,
                     c->sc.delta, c->sc.ddelta, c->sc.force, c->sc.cart,
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
@@ -228,6 +239,10 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
         m->mass[i] = m->g.mass * f;
         for (int k = 0; k < 3; k++) m->inertia[3 * i + k] = m->g.inertia[k] * f;
     }
+    if (chain_simd_init(c, p->solver_vector_path)) {
+        snprintf(err, errlen, "out of memory for a chain of %d carts", m->n_carts);
+        goto fail;
+    }
     chain_set_inputs(c, p);
     double v0 = p->chain_v_init >= 0 ? p->chain_v_init : p->drive_v_ref;
     if (chain_initial_state(c, v0, err, errlen)) goto fail;
@@ -235,12 +250,14 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
     dopri_reset(&c->st.ode, 0.0, 1e-4);
     /* contact memory at the start: closed contacts use the floor */
     chain_rhs(c, 0.0, c->st.y, c->ode.k[0]);
+    chain_simd_sync(c);
     c->st.ode.n_rhs = 1;
     for (int k = 0; k < N_SLOT * m->n_carts; k++) {
         c->st.v_onset[k] = c->sc.delta[k] > 0 ? m->v_min : 0.0;
         c->st.delta_prev[k] = c->sc.delta[k];
         c->st.ddelta_prev[k] = c->sc.ddelta[k];
     }
+    chain_simd_invalidate(c);
     c->st.ode.fsal_valid = 1;
     c->scratch_at_state = 1;
     return c;
@@ -300,4 +317,5 @@ void chain_state_load(Chain *c, const double *buf) {
     memcpy(c->ode.k[0], p, sizeof(double) * (size_t)c->m.n_y);
     o->fsal_valid = buf[11] != 0;
     c->scratch_at_state = 0;
+    chain_simd_invalidate(c);
 }

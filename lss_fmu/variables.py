@@ -187,6 +187,16 @@ VARIABLES: list[Var] = [
     Var("transducer.joint.v_axial", "Real", OUT, "continuous",
         "axial relative velocity at the transducer cart's front joint (closing positive)", "m/s"),
     Var("cart.r_drive", "Real", CP, "fixed", "rolling radius r0 of the driving wheels", "m"),
+    # --- issue 19: the vectorised right-hand side and the 8th-order pair ------------------
+    Var("solver.vector_path", "Integer", P, "fixed",
+        "right-hand-side code path: 0 auto (the widest this CPU runs), 1 scalar, 2 AVX2, 3 AVX-512; "
+        "a path the CPU or the build lacks falls back to the next narrower one (see solver.vector_path_used)",
+        start=0, min=0, max=3),
+    Var("solver.method", "Integer", P, "fixed",
+        "embedded Runge-Kutta pair: 0 Dormand-Prince 5(4), 1 Dormand-Prince 8(5,3) (DOP853)",
+        start=0, min=0, max=1),
+    Var("solver.vector_path_used", "Integer", CP, "fixed",
+        "right-hand-side code path in use: 1 scalar, 2 AVX2, 3 AVX-512"),
 ]
 
 BY_NAME = {v.name: v for v in VARIABLES}
