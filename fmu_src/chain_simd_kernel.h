@@ -485,6 +485,58 @@ static void k_joints(Chain *c) {
     }
 }
 
+/* 4 x 4 transposes between rows (a cart's 13 doubles) and columns (one
+ * quantity of 4 carts), in 256-bit registers on both paths */
+KI void tr4(__m256d a0, __m256d a1, __m256d a2, __m256d a3, __m256d *c) {
+    __m256d t0 = _mm256_unpacklo_pd(a0, a1), t1 = _mm256_unpackhi_pd(a0, a1);
+    __m256d t2 = _mm256_unpacklo_pd(a2, a3), t3 = _mm256_unpackhi_pd(a2, a3);
+    c[0] = _mm256_permute2f128_pd(t0, t2, 0x20);
+    c[1] = _mm256_permute2f128_pd(t1, t3, 0x20);
+    c[2] = _mm256_permute2f128_pd(t0, t2, 0x31);
+    c[3] = _mm256_permute2f128_pd(t1, t3, 0x31);
+}
+
+/* y (13 per cart) into Y by quantity; the slots after the last cart copy cart 0 */
+static void k_gather(ChainSimd *S, const double *y) {
+    int N = S->N, i = 0;
+    for (; i + 4 <= N; i += 4) {
+        const double *r0 = y + CART_NY * i, *r1 = r0 + CART_NY, *r2 = r1 + CART_NY, *r3 = r2 + CART_NY;
+        for (int c0 = 0; c0 < 12; c0 += 4) {
+            __m256d col[4];
+            tr4(_mm256_loadu_pd(r0 + c0), _mm256_loadu_pd(r1 + c0), _mm256_loadu_pd(r2 + c0),
+                _mm256_loadu_pd(r3 + c0), col);
+            for (int k = 0; k < 4; k++) _mm256_storeu_pd(S->Y[c0 + k] + i, col[k]);
+        }
+        _mm256_storeu_pd(S->Y[12] + i, _mm256_set_pd(r3[12], r2[12], r1[12], r0[12]));
+    }
+    for (; i < N; i++)
+        for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[CART_NY * i + k];
+    for (i = N; i < S->NP; i++)
+        for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[k];
+}
+
+/* columns d[13] of 4 carts (n of them real) into their rows of dy */
+KI void scatter4(double *dy, const __m256d *d, int n) {
+    if (n == 4) {
+        double *r[4] = {dy, dy + CART_NY, dy + 2 * CART_NY, dy + 3 * CART_NY};
+        for (int c0 = 0; c0 < 12; c0 += 4) {
+            __m256d row[4];
+            tr4(d[c0], d[c0 + 1], d[c0 + 2], d[c0 + 3], row);
+            for (int l = 0; l < 4; l++) _mm256_storeu_pd(r[l] + c0, row[l]);
+        }
+        __m128d lo = _mm256_castpd256_pd128(d[12]), hi = _mm256_extractf128_pd(d[12], 1);
+        _mm_storel_pd(r[0] + 12, lo);
+        _mm_storeh_pd(r[1] + 12, lo);
+        _mm_storel_pd(r[2] + 12, hi);
+        _mm_storeh_pd(r[3] + 12, hi);
+        return;
+    }
+    double tmp[CART_NY][4];
+    for (int k = 0; k < CART_NY; k++) _mm256_storeu_pd(tmp[k], d[k]);
+    for (int l = 0; l < n; l++)
+        for (int k = 0; k < CART_NY; k++) dy[CART_NY * l + k] = tmp[k][l];
+}
+
 /* --- 6. forces summed, Newton-Euler (cart.c cart_derivatives), into dy ----- */
 static void k_newton_euler(ChainSimd *S, double *dy) {
     for (int i = 0; i < S->NW; i += VW) {
@@ -512,25 +564,19 @@ static void k_newton_euler(ChainSimd *S, double *dy) {
         d[10] = (tb[0] - crx(w1, w2, Iw1, Iw2)) * i0;
         d[11] = (tb[1] - crx(w2, w0, Iw2, Iw0)) * i1;
         d[12] = (tb[2] - crx(w0, w1, Iw0, Iw1)) * i2;
-        double tmp[CART_NY][VW];
-        for (int k = 0; k < CART_NY; k++) vst(tmp[k], d[k]);
         int n = S->N - i < VW ? S->N - i : VW;
-        for (int l = 0; l < n; l++) {
-            double *o = dy + CART_NY * (i + l);
-            for (int k = 0; k < CART_NY; k++) o[k] = tmp[k][l];
+#if VW == 4
+        scatter4(dy + CART_NY * i, d, n);
+#else
+        __m256d h[CART_NY];
+        for (int k = 0; k < CART_NY; k++) h[k] = _mm512_castpd512_pd256(d[k]);
+        scatter4(dy + CART_NY * i, h, n < 4 ? n : 4);
+        if (n > 4) {
+            for (int k = 0; k < CART_NY; k++) h[k] = _mm512_extractf64x4_pd(d[k], 1);
+            scatter4(dy + CART_NY * (i + 4), h, n - 4);
         }
+#endif
     }
-}
-
-/* y (13 per cart) into Y by quantity; the slots after the last cart copy cart 0 */
-static void k_gather(ChainSimd *S, const double *y) {
-    int N = S->N;
-    for (int i = 0; i < N; i++) {
-        const double *yi = y + CART_NY * i;
-        for (int k = 0; k < CART_NY; k++) S->Y[k][i] = yi[k];
-    }
-    for (int i = N; i < S->NP; i++)
-        for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[k];
 }
 
 static double vsum_range(const double *a, int n) {

@@ -35,32 +35,41 @@ void dopri_reset(DopriState *s, double t0, double h0) {
 
 /* The stage combinations run over an even count (m = n & ~1) with
  * restrict arguments so that -O2 vectorises them (two doubles per SSE2
- * instruction); the odd last component, if any, follows in scalar code. */
-static void comb1(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0) {
+ * instruction); the odd last component, if any, follows in scalar code.
+ * Where GCC builds for x86-64 Linux they are also compiled for AVX2 and
+ * AVX-512 (target_clones: the dynamic loader picks one per process from
+ * the CPU, an ifunc, so there is no dispatch state of ours); each lane does
+ * the same arithmetic in the same order, so every clone gives the same bits. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(LSS_NO_SIMD)
+#define STAGE_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define STAGE_CLONES
+#endif
+STAGE_CLONES static void comb1(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + b0 * k0[i];
     for (int i = m; i < n; i++) o[i] = y[i] + b0 * k0[i];
 }
-static void comb2(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb2(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i]);
 }
-static void comb3(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb3(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1, double b2, const double *restrict k2) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i]);
 }
-static void comb4(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb4(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1, double b2, const double *restrict k2, double b3,
                   const double *restrict k3) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i]);
 }
-static void comb5(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb5(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1, double b2, const double *restrict k2, double b3,
                   const double *restrict k3, double b4, const double *restrict k4) {
     int m = n & ~1;
@@ -68,7 +77,7 @@ static void comb5(int n, double *restrict o, const double *restrict y, double b0
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i] + b4 * k4[i]);
 }
 /* |sum g_j k_j| / (tol (scale + rel max(|y|, |y_new|))) per component */
-static void err_ratio(int n, double *restrict o, const double *restrict y, const double *restrict yn,
+STAGE_CLONES static void err_ratio(int n, double *restrict o, const double *restrict y, const double *restrict yn,
                       const double *restrict sc, const double *restrict rl, double tol, const double *g,
                       const double *restrict k0, const double *restrict k2, const double *restrict k3,
                       const double *restrict k4, const double *restrict k5, const double *restrict k6) {
