@@ -120,7 +120,8 @@ static int allocate(Chain *c) {
     c->sc.ddelta = xcalloc(c, ns, sizeof(double), &fail);
     c->sc.force = xcalloc(c, ns, sizeof(double), &fail);
     c->sc.cart = xcalloc(c, N, sizeof(CartScratch), &fail);
-    for (int k = 0; k < 7; k++) c->ode.k[k] = xcalloc(c, ny, sizeof(double), &fail);
+    int nk = c->m.method == LSS_METHOD_DOP853 ? DOPRI_NK : 7;
+    for (int k = 0; k < nk; k++) c->ode.k[k] = xcalloc(c, ny, sizeof(double), &fail);
     c->ode.ytmp = xcalloc(c, ny, sizeof(double), &fail);
     c->ode.ynew = xcalloc(c, ny, sizeof(double), &fail);
     c->dy_scratch = xcalloc(c, ny, sizeof(double), &fail);
@@ -138,6 +139,7 @@ void chain_free(Chain *c) {
     void *ptrs[] = {c->st.y, c->st.s_hint, c->st.v_onset, c->st.delta_prev, c->st.ddelta_prev,
                     c->sc.delta, c->sc.ddelta, c->sc.force, c->sc.cart,
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
+                    c->ode.k[7], c->ode.k[8], c->ode.k[9], c->ode.k[10], c->ode.k[11], c->ode.k[12],
                     c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel,
                     c->m.mass, c->m.inertia};
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
@@ -226,6 +228,7 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
     m->pretension = p->chain_pretension;
     m->tol = p->solver_tolerance;
     m->h_max = p->solver_h_max;
+    m->method = p->solver_method;
     cart_geometry_init(&m->g, &m->type, m->track.length / m->n_carts, p->track_guide_gap, p->cart_mass_factor);
     if (allocate(c)) {
         snprintf(err, errlen, "out of memory for a chain of %d carts", m->n_carts);

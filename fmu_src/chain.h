@@ -74,6 +74,7 @@ typedef struct ChainModel {
     int law_code;
     double v_min, mu_roll, F_max, motor_length, pretension, preload, gravity;
     double tol, h_max;
+    int method;                       /* LSS_METHOD_*: the embedded pair */
     Effects fx;                       /* the effects catalogue (effects.h) */
     double *mass;                     /* [N] mass of each cart, kg (g.mass unless the masses differ) */
     double *inertia;                  /* [3N] its principal moments, kg m^2 */

@@ -61,6 +61,7 @@ static int accepted(void *ctx, double t, double *y) {
 void chain_solver_init(Chain *c) {
     Dopri *d = &c->ode;
     d->n = c->m.n_y;
+    d->method = c->m.method == LSS_METHOD_DOP853 ? DOPRI_DOP853 : DOPRI_DOPRI5;
     d->rhs = rhs;
     d->accepted = accepted;
     d->ctx = c;
