@@ -55,8 +55,8 @@ int chain_simd_init(Chain *c, int requested) {
     if (c->path == LSS_PATH_SCALAR) return 0;
     int N = c->m.n_carts, W = c->path == LSS_PATH_AVX512 ? 8 : 4;
     int NW = (N + W - 1) / W * W, NP = NW + W;
-    const int n_arrays = CART_NY + 12 + 25 + 29 + 17 + 6 + 7;
-    size_t bytes = sizeof(ChainSimd) + 64 + sizeof(double) * (size_t)n_arrays * NP + (size_t)2 * NP +
+    const int n_arrays = CART_NY + 12 + 25 + 29 + 17 + 6 + 7 + 2 + 3 * SIMD_NMOT;
+    size_t bytes = sizeof(ChainSimd) + 64 + sizeof(double) * (size_t)n_arrays * NP + (size_t)3 * NP +
                    sizeof(int) * (size_t)N + 64;
     void *block = c->m.alloc.calloc(1, bytes);
     if (!block) return 1;
@@ -98,10 +98,15 @@ int chain_simd_init(Chain *c, int requested) {
     for (int k = 0; k < 3; k++) S->iI[k] = take(&p, NP);
     for (int k = 0; k < 3; k++) S->In[k] = take(&p, NP);
     S->mg = take(&p, NP);
+    S->mlo = take(&p, NP); S->mhi = take(&p, NP);
+    for (int k = 0; k < SIMD_NMOT; k++) {
+        S->ms0[k] = take(&p, NP); S->ms1[k] = take(&p, NP); S->mil[k] = take(&p, NP);
+    }
     unsigned char *u = (unsigned char *)p;
     S->kind = u;
     S->chunk = u + NP;
-    S->fix = (int *)(((uintptr_t)(u + 2 * NP) + 7) & ~(uintptr_t)7);
+    S->mfull = u + 2 * NP;
+    S->fix = (int *)(((uintptr_t)(u + 3 * NP) + 7) & ~(uintptr_t)7);
     for (int i = 0; i < NP; i++) {
         int j = i < N ? i : 0;
         S->im[i] = 1.0 / c->m.mass[j];
@@ -111,6 +116,11 @@ int chain_simd_init(Chain *c, int requested) {
         }
         S->mg[i] = c->m.mass[j] * c->m.gravity;
         S->key[i] = NAN;  /* no base yet */
+        S->mlo[i] = S->mhi[i] = NAN;
+        for (int k = 0; k < SIMD_NMOT; k++) {  /* an empty slot overlaps nothing */
+            S->ms0[k][i] = S->ms1[k][i] = -1e30;
+            S->mil[k][i] = 0.0;
+        }
     }
     S->vo_dirty = 1;
     S->synced = 0;
@@ -150,6 +160,37 @@ static void put_base(ChainSimd *S, const TrackBase *b, int i) {
     S->kind[i] = (unsigned char)b->kind;
 }
 
+/* The motors whose span can overlap cart i's plate while its centre stays
+ * within SIMD_MWIN of sp0 (arc lengths unwrapped around sp0: a motor a lap
+ * away is listed shifted by the track length). */
+static void motor_window(Chain *c, int i, double sp0) {
+    ChainSimd *S = c->simd;
+    const Track *t = &c->m.track;
+    double half = 0.5 * c->m.g.plate_length, L = t->length;
+    double a = sp0 - SIMD_MWIN - half, b = sp0 + SIMD_MWIN + half;
+    int n = 0, full = 0;
+    for (int k = 0; k < SIMD_NMOT; k++) {
+        S->ms0[k][i] = S->ms1[k][i] = -1e30;
+        S->mil[k][i] = 0.0;
+    }
+    for (int lap = -1; lap <= 1; lap++)
+        for (int j = 0; j < t->n_motors; j++) {
+            double s0 = t->motor_s0[j] + lap * L, s1 = t->motor_s1[j] + lap * L;
+            if (!(s1 > s0) || !(s1 > a) || !(s0 < b)) continue;
+            if (n == SIMD_NMOT) {
+                full = 1;
+                continue;
+            }
+            S->ms0[n][i] = s0;
+            S->ms1[n][i] = s1;
+            S->mil[n][i] = 1.0 / (s1 - s0);
+            n++;
+        }
+    S->mlo[i] = sp0 - SIMD_MWIN;
+    S->mhi[i] = sp0 + SIMD_MWIN;
+    S->mfull[i] = (unsigned char)full;
+}
+
 /* Before every evaluation: the bases of the carts whose s_hint moved (one
  * track_frame each, as cart_kinematics does on the scalar path), the chunk
  * kinds and the twisted carts, the contact memory by quantity. */
@@ -168,6 +209,9 @@ void simd_refresh(Chain *c, const double *y) {
             put_base(S, &cs->base, i);
             S->key[i] = sh;
             changed = 1;
+            double sp0 = sh - (m->g.x_axle - m->g.x_motor);
+            if (m->track.n_motors > 0 && !(sp0 >= S->mlo[i] + 0.5 * SIMD_MWIN && sp0 <= S->mhi[i] - 0.5 * SIMD_MWIN))
+                motor_window(c, i, sp0);
         }
     }
     if (changed) {
@@ -254,6 +298,12 @@ void simd_drive(Chain *c, double F_cmd) {
         sc->F_total += F;
         sc->P_total += v3_dot(fv, v);
     }
+}
+
+/* The thrust of cart i by the scalar walk (drive_thrust): for a plate
+ * outside its window of candidates, or with more motors than it holds. */
+void simd_drive_lane(Chain *c, int i, double F_cmd, double *F) {
+    if (!drive_thrust(&c->m, c->simd->s[i], &c->sc.cart[i].motor, F_cmd, F)) *F = 0.0;
 }
 
 /* The globals' derivatives and the transducer's joint quantities. */

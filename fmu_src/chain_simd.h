@@ -49,6 +49,8 @@
 #endif
 
 #define SIMD_MAXW 8
+#define SIMD_NMOT 3       /* motor candidates per cart */
+#define SIMD_MWIN 0.25    /* half width of the plate window the candidates cover, m */
 
 typedef struct ChainSimd {
     int W;                            /* lanes */
@@ -73,6 +75,10 @@ typedef struct ChainSimd {
     /* the contact memory (ChainState.v_onset) by quantity */
     double *voW[N_WHEEL], *voJ[2];
     double *im, *iI[3], *In[3], *mg;  /* 1 / mass, 1 / principal moments, the moments, the weight */
+    /* the motors that can reach each cart's plate while its plate centre
+     * stays in [mlo, mhi] (refreshed as it moves): start, end, 1 / length */
+    double *mlo, *mhi, *ms0[SIMD_NMOT], *ms1[SIMD_NMOT], *mil[SIMD_NMOT];
+    unsigned char *mfull;             /* [NP] more motors than SIMD_NMOT: the scalar walk */
     unsigned char *kind;              /* [NP] TL_* of each base */
     unsigned char *chunk;             /* [NW / W] 0: all straight; 1: arc code */
     int *fix;                         /* [N] carts for the scalar code */
@@ -105,6 +111,7 @@ void chain_rhs_avx512(Chain *c, const double *y, double *dy);
 void simd_refresh(Chain *c, const double *y);
 void simd_fix_cart(Chain *c, const double *y, int i);
 void simd_drive(Chain *c, double F_cmd);
+void simd_drive_lane(Chain *c, int i, double F_cmd, double *F);
 void simd_finish(Chain *c, const double *y, double *dy, double F_cmd, double zdot, double sum_vt);
 
 #endif

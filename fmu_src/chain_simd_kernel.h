@@ -538,7 +538,57 @@ KI void scatter4(double *dy, const __m256d *d, int n) {
 }
 
 /* --- 6. forces summed, Newton-Euler (cart.c cart_derivatives), into dy ----- */
-static void k_newton_euler(ChainSimd *S, double *dy) {
+/* The motors (drive.c drive_forces) with the candidates of chain_simd.c:
+ * thrust F_cmd times the covered share of each candidate motor, along t at
+ * the motor point; lanes outside their window take the scalar walk. */
+KI void v_drive(Chain *c, int i, double F_cmd, const V *Rm, V *F, V *T, V *Ftot, V *Ptot) {
+    ChainSimd *S = c->simd;
+    const ChainModel *m = &c->m;
+    V sp = vld(S->s + i) - vset(m->g.x_axle - m->g.x_motor), half = vset(0.5 * m->g.plate_length);
+    V a = sp - half, b = sp + half, frac = vzero();
+    for (int k = 0; k < SIMD_NMOT; k++) {
+        V ov = vmin(b, vld(S->ms1[k] + i)) - vmax(a, vld(S->ms0[k] + i));
+        frac = vfma(vmax(ov, vzero()), vld(S->mil[k] + i), frac);
+    }
+    V Fm = vset(F_cmd) * frac;
+    M inw = mand(vge(sp, vld(S->mlo + i)), vge(vld(S->mhi + i), sp));
+    int bad = ~mbits(inw) & MALL;
+    for (int l = 0; l < VW && l < S->N - i; l++)
+        if (S->mfull[i + l]) bad |= 1 << l;
+    bad &= (S->N - i >= VW) ? MALL : (1 << (S->N - i)) - 1;
+    if (bad) {
+        double t[VW];
+        vst(t, Fm);
+        for (int l = 0; l < VW; l++)
+            if (bad >> l & 1) simd_drive_lane(c, i + l, F_cmd, &t[l]);
+        Fm = vld(t);
+    }
+    if (S->N - i < VW) {  /* the padding lanes get no thrust */
+        double t[VW];
+        vst(t, Fm);
+        for (int l = S->N - i; l < VW; l++) t[l] = 0.0;
+        Fm = vld(t);
+    }
+    V xm = vset(m->g.x_motor), zm = vset(m->g.z_motor), rm[3], w[3], fv[3], v[3];
+    for (int k = 0; k < 3; k++) {
+        rm[k] = vfma(Rm[3 * k], xm, Rm[3 * k + 2] * zm);
+        w[k] = vld(S->ww[k] + i);
+        fv[k] = vld(S->t[k] + i) * Fm;
+        F[k] = F[k] + fv[k];
+    }
+    v[0] = vld(S->Y[7] + i) + crx(w[1], w[2], rm[1], rm[2]);
+    v[1] = vld(S->Y[8] + i) + crx(w[2], w[0], rm[2], rm[0]);
+    v[2] = vld(S->Y[9] + i) + crx(w[0], w[1], rm[0], rm[1]);
+    T[0] = T[0] + crx(rm[1], rm[2], fv[1], fv[2]);
+    T[1] = T[1] + crx(rm[2], rm[0], fv[2], fv[0]);
+    T[2] = T[2] + crx(rm[0], rm[1], fv[0], fv[1]);
+    *Ftot = *Ftot + Fm;
+    *Ptot = *Ptot + dot3(fv[0], fv[1], fv[2], v[0], v[1], v[2]);
+}
+
+static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
+    ChainSimd *S = c->simd;
+    V Ftot = vzero(), Ptot = vzero();
     for (int i = 0; i < S->NW; i += VW) {
         V F[3], T[3], Rm[9];
         for (int k = 0; k < 3; k++) {
@@ -546,6 +596,7 @@ static void k_newton_euler(ChainSimd *S, double *dy) {
             T[k] = vld(S->Tw[k] + i) + vld(S->jTA[k] + i + 1) + vld(S->jTB[k] + i);
         }
         for (int k = 0; k < 9; k++) Rm[k] = vld(S->R[k] + i);
+        if (vdrive) v_drive(c, i, F_cmd, Rm, F, T, &Ftot, &Ptot);
         V q0 = vld(S->Y[3] + i), q1 = vld(S->Y[4] + i), q2 = vld(S->Y[5] + i), q3 = vld(S->Y[6] + i);
         V w0 = vld(S->Y[10] + i), w1 = vld(S->Y[11] + i), w2 = vld(S->Y[12] + i);
         V hf = vset(0.5), im = vld(S->im + i);
@@ -576,6 +627,17 @@ static void k_newton_euler(ChainSimd *S, double *dy) {
             scatter4(dy + CART_NY * (i + 4), h, n - 4);
         }
 #endif
+    }
+    if (vdrive) {
+        double a[VW], b[VW], ft = 0.0, pt = 0.0;
+        vst(a, Ftot);
+        vst(b, Ptot);
+        for (int l = 0; l < VW; l++) {
+            ft += a[l];
+            pt += b[l];
+        }
+        c->sc.F_total = ft;
+        c->sc.P_total = pt;
     }
 }
 
@@ -617,7 +679,9 @@ void SIMD_ENTRY(Chain *c, const double *y, double *dy) {
     double sum_vt = vsum_range(S->vt, S->N), zdot;
     double F_cmd = drive_command(m, &c->st, sum_vt / S->N, y[CART_NY * S->N + G_INT], &zdot);
     k_joints(c);
-    simd_drive(c, F_cmd);
-    k_newton_euler(S, dy);
+    /* the motors: in the last kernel, or by the scalar walk where the ripple is on */
+    int vdrive = m->track.n_motors > 0 && F_cmd != 0.0 && !m->fx.ripple_on;
+    if (!vdrive) simd_drive(c, F_cmd);
+    k_newton_euler(c, dy, F_cmd, vdrive);
     simd_finish(c, y, dy, F_cmd, zdot, sum_vt);
 }
