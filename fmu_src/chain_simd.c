@@ -160,6 +160,17 @@ static void put_base(ChainSimd *S, const TrackBase *b, int i) {
     S->kind[i] = (unsigned char)b->kind;
 }
 
+static void copy_base(ChainSimd *S, int from, int to) {
+    for (int k = 0; k < 9; k++) S->bR[k][to] = S->bR[k][from];
+    for (int k = 0; k < 3; k++) {
+        S->bc[k][to] = S->bc[k][from];
+        S->ch[k][to] = S->ch[k][from];
+    }
+    S->bs[to] = S->bs[from]; S->lo[to] = S->lo[from]; S->hi[to] = S->hi[from]; S->ich0[to] = S->ich0[from];
+    S->k[to] = S->k[from]; S->uy[to] = S->uy[from]; S->uz[to] = S->uz[from]; S->cm[to] = S->cm[from];
+    S->kind[to] = S->kind[from];
+}
+
 /* The motors whose span can overlap cart i's plate while its centre stays
  * within SIMD_MWIN of sp0 (arc lengths unwrapped around sp0: a motor a lap
  * away is listed shifted by the track length). */
@@ -191,23 +202,28 @@ static void motor_window(Chain *c, int i, double sp0) {
     S->mfull[i] = (unsigned char)full;
 }
 
-/* Before every evaluation: the bases of the carts whose s_hint moved (one
- * track_frame each, as cart_kinematics does on the scalar path), the chunk
- * kinds and the twisted carts, the contact memory by quantity. */
+/* Before every evaluation: the bases of the carts whose axle reached another
+ * point of the SIMD_BASE_MOVE grid (one track_frame each; the scalar path
+ * builds one per cart and accepted step, at the axle), the chunk kinds and
+ * the twisted carts, the contact memory by quantity. */
 void simd_refresh(Chain *c, const double *y) {
     ChainSimd *S = c->simd;
     const ChainModel *m = &c->m;
     int N = S->N, changed = 0;
     for (int i = 0; i < N; i++) {
         double sh = c->st.s_hint[i];
-        CartScratch *cs = &c->sc.cart[i];
-        if (S->key[i] != sh) {
-            if (!cs->base.e || cs->base_key != sh) {
-                track_base(&m->track, sh, &cs->el, &cs->base);
-                cs->base_key = sh;
-            }
-            put_base(S, &cs->base, i);
-            S->key[i] = sh;
+        /* the base sits at the grid point of SIMD_BASE_MOVE nearest the axle
+         * (a function of the state alone, so that a restored state replays
+         * bit for bit); the projections are exact to rounding from any base
+         * on the cart's element, and one that leaves it is taken by the
+         * scalar code */
+        double g = floor(sh * (1.0 / SIMD_BASE_MOVE) + 0.5) * SIMD_BASE_MOVE;
+        if (S->key[i] != g) {
+            TrackBase b;
+            int el = c->sc.cart[i].el;
+            track_base(&m->track, g, &el, &b);
+            put_base(S, &b, i);
+            S->key[i] = g;
             changed = 1;
             double sp0 = sh - (m->g.x_axle - m->g.x_motor);
             if (m->track.n_motors > 0 && !(sp0 >= S->mlo[i] + 0.5 * SIMD_MWIN && sp0 <= S->mhi[i] - 0.5 * SIMD_MWIN))
@@ -215,7 +231,7 @@ void simd_refresh(Chain *c, const double *y) {
         }
     }
     if (changed) {
-        for (int i = N; i < S->NP; i++) put_base(S, &c->sc.cart[0].base, i);
+        for (int i = N; i < S->NP; i++) copy_base(S, 0, i);
         int nt = 0;
         for (int i = 0; i < N; i++)
             if (S->kind[i] == TL_TWISTED) S->fix[nt++] = i;

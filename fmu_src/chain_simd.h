@@ -10,7 +10,8 @@
  *
  *   1. rotation and world angular rate of every cart;
  *   2. each cart against the track in the coordinates of its base (the
- *      track frame at its axle after the last accepted step): the axle's
+ *      track frame at the point of a 5 cm grid nearest its axle after the
+ *      last accepted step; the scalar path's is at the axle): the axle's
  *      projection and the four wheels. A chunk whose carts all sit on
  *      straights takes the straight code (the frame is the base's); any
  *      other takes the arc code, which is exact on straights too (the plane
@@ -49,6 +50,7 @@
 #endif
 
 #define SIMD_MAXW 8
+#define SIMD_BASE_MOVE 0.05  /* m: grid of the vector paths' base points */
 #define SIMD_NMOT 3       /* motor candidates per cart */
 #define SIMD_MWIN 0.25    /* half width of the plate window the candidates cover, m */
 
@@ -61,7 +63,7 @@ typedef struct ChainSimd {
     double *R[9], *ww[3];             /* rotation body -> world, world angular rate */
     /* the carts' bases (CartScratch.base, by quantity), refreshed when s_hint moves */
     double *bR[9], *bc[3], *ch[3], *bs, *lo, *hi, *ich0, *k, *uy, *uz, *cm;
-    double *key;                      /* the s_hint each base was built at */
+    double *key;                      /* the grid point each base was built at */
     /* wheels and axle */
     double *Fw[3], *Tw[3];            /* wheel (+ weight, running resistance, motor) force and torque, world */
     double *s, *vt, *t[3];            /* axle arc length, tangential speed, tangent (world) */
