@@ -40,7 +40,8 @@ void dopri_reset(DopriState *s, double t0, double h0) {
  * AVX-512 (target_clones: the dynamic loader picks one per process from
  * the CPU, an ifunc, so there is no dispatch state of ours); each lane does
  * the same arithmetic in the same order, so every clone gives the same bits. */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(LSS_NO_SIMD)
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(LSS_NO_SIMD) && \
+    !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)  /* ifunc resolvers run before the sanitizers start */
 #define STAGE_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define STAGE_CLONES
