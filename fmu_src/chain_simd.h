@@ -41,15 +41,15 @@
 
 #include "chain_internal.h"
 
-/* The vector paths are compiled where GCC targets x86-64; elsewhere (other
- * compilers, other machines) only the scalar path exists. */
-/* OPEN BUG (issue 19): the sanitizer builds of the C harness (-O0 with ASan,
- * -O1 with TSan) crash in the AVX-512 kernel (a vector store to a stack
- * array in vsum_range), not understood yet; the -O2 builds of the FMU and the
- * test library run it cleanly. Until it is found, sanitizer builds take the
- * scalar path only. */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(LSS_NO_SIMD) && \
-    !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+/* The vector paths are compiled where GCC (7 or later: its target pragmas,
+ * vector extensions and <cpuid.h>) targets x86-64; elsewhere (clang, icc,
+ * other compilers, other machines, or -DLSS_NO_SIMD) only the scalar path
+ * exists. Sanitizer builds run them too (tests/test_c_harness.py,
+ * tests/test_vector_sanitizers.py). The kernels keep lanes they treat one by
+ * one in unions with the vector type (Lanes in chain_simd_kernel.h), never in
+ * bare double arrays: see there for the ASan crash this cured. */
+#if defined(__GNUC__) && __GNUC__ >= 7 && !defined(__clang__) && !defined(__INTEL_COMPILER) && \
+    defined(__x86_64__) && !defined(LSS_NO_SIMD)
 #define LSS_HAVE_SIMD 1
 #else
 #define LSS_HAVE_SIMD 0

@@ -12,6 +12,10 @@
 #define KI static inline __attribute__((always_inline))
 
 /* --- the vector type and its few operations --------------------------------- */
+/* vld and vst are unaligned (loadu, storeu) and touch only the workspace's
+ * arrays (chain_simd.c: NP = NW + W slots each, so a chunk at i < NW and the
+ * joints' neighbour at i + 1 <= NW stay inside; the offsets i + 1 are not
+ * multiples of the width anyway); lanes on the stack are Lanes (below). */
 #if VW == 4
 typedef __m256d V;
 typedef __m256d M;                    /* lane masks: all ones / all zeros */
@@ -54,6 +58,24 @@ KI V vand(M m, V a) { return _mm512_maskz_mov_pd(m, a); }
 #error "VW must be 4 or 8"
 #endif
 
+/* The lanes of a vector as doubles, for the code that works lane by lane (the
+ * scalar fallbacks, sums in lane order). A union with the vector, never a
+ * bare double[VW] filled by vst: its declared alignment is the vector's, so
+ * every aligned access the compiler derives holds wherever the frame lives.
+ * The bare arrays crashed the AVX-512 kernel at -O1 under AddressSanitizer
+ * with detect_stack_use_after_return (issue 19, a "wild read" in vsum_range):
+ * GCC (12.2; the same code in later cfgexpand.cc, expand_stack_vars)
+ * gives an ASan-protected local the alignment its frame offset implies,
+ * taking the frame's base to be aligned like the frame (64: it holds
+ * __m512d), and so turned vst into the aligned vmovapd; but a fake-stack
+ * frame is aligned only to the largest alignment the protected locals
+ * declare (there 32: double[8] beside __m256d[4]), and the array sat at 32
+ * mod 64. */
+typedef union {
+    V v;
+    double d[VW];
+} Lanes;
+
 KI V vzero(void) { return vset(0.0); }
 KI V vabs(V a) { return vmax(a, -a); }
 /* a x b, one component at a time */
@@ -65,10 +87,9 @@ KI V vpow(V d, double n) {
     if (n == 1.5) return d * vsqrt(d);
     if (n == 1.0) return d;
     if (n == 2.0) return d * d;
-    double t[VW];
-    vst(t, d);
-    for (int l = 0; l < VW; l++) t[l] = pow(t[l], n);
-    return vld(t);
+    Lanes t = {.v = d};
+    for (int l = 0; l < VW; l++) t.d[l] = pow(t.d[l], n);
+    return t.v;
 }
 
 /* Hunt-Crossley force of the lanes with delta > 0 (contact_force with
@@ -178,7 +199,7 @@ typedef struct {
 /* The bump and an out-of-round wheel (wheels.c surface_effects), lane by
  * lane: they are off by default and cost a sine where on. */
 static void surface_lanes(Chain *c, int i0, int k, const double *ds, const double *d1, const double *d2,
-                          const double *vt, double *dh, double *slope) {
+                          const double *vt, double *dh, double *slope) {  /* each [VW] */
     const Effects *fx = &c->m.fx;
     ChainSimd *S = c->simd;
     for (int l = 0; l < VW; l++) {
@@ -248,11 +269,10 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     vst(S->ws[k] + i, vt * vset(1.0 / r));
     V slope = vzero();
     if (drive && SURF) {
-        double a_ds[VW], a_d1[VW], a_d2[VW], a_vt[VW], a_dh[VW], a_sl[VW];
-        vst(a_ds, f.ds); vst(a_d1, f.d1); vst(a_d2, f.d2); vst(a_vt, vt);
-        surface_lanes(c, i, k, a_ds, a_d1, a_d2, a_vt, a_dh, a_sl);
-        slope = vld(a_sl);
-        delta = delta + vld(a_dh);
+        Lanes a_ds = {.v = f.ds}, a_d1 = {.v = f.d1}, a_d2 = {.v = f.d2}, a_vt = {.v = vt}, a_dh, a_sl;
+        surface_lanes(c, i, k, a_ds.d, a_d1.d, a_d2.d, a_vt.d, a_dh.d, a_sl.d);
+        slope = a_sl.v;
+        delta = delta + a_dh.v;
         ddelta = vfma(slope, vt, ddelta);
     }
     V fn, fe;
@@ -531,10 +551,13 @@ KI void scatter4(double *dy, const __m256d *d, int n) {
         _mm_storeh_pd(r[3] + 12, hi);
         return;
     }
-    double tmp[CART_NY][4];
-    for (int k = 0; k < CART_NY; k++) _mm256_storeu_pd(tmp[k], d[k]);
+    union {
+        __m256d v;
+        double d[4];
+    } tmp[CART_NY];  /* as Lanes: the alignment the vector needs, declared */
+    for (int k = 0; k < CART_NY; k++) tmp[k].v = d[k];
     for (int l = 0; l < n; l++)
-        for (int k = 0; k < CART_NY; k++) dy[CART_NY * l + k] = tmp[k][l];
+        for (int k = 0; k < CART_NY; k++) dy[CART_NY * l + k] = tmp[k].d[l];
 }
 
 /* --- 6. forces summed, Newton-Euler (cart.c cart_derivatives), into dy ----- */
@@ -557,17 +580,15 @@ KI void v_drive(Chain *c, int i, double F_cmd, const V *Rm, V *F, V *T, V *Ftot,
         if (S->mfull[i + l]) bad |= 1 << l;
     bad &= (S->N - i >= VW) ? MALL : (1 << (S->N - i)) - 1;
     if (bad) {
-        double t[VW];
-        vst(t, Fm);
+        Lanes t = {.v = Fm};
         for (int l = 0; l < VW; l++)
-            if (bad >> l & 1) simd_drive_lane(c, i + l, F_cmd, &t[l]);
-        Fm = vld(t);
+            if (bad >> l & 1) simd_drive_lane(c, i + l, F_cmd, &t.d[l]);
+        Fm = t.v;
     }
     if (S->N - i < VW) {  /* the padding lanes get no thrust */
-        double t[VW];
-        vst(t, Fm);
-        for (int l = S->N - i; l < VW; l++) t[l] = 0.0;
-        Fm = vld(t);
+        Lanes t = {.v = Fm};
+        for (int l = S->N - i; l < VW; l++) t.d[l] = 0.0;
+        Fm = t.v;
     }
     V xm = vset(m->g.x_motor), zm = vset(m->g.z_motor), rm[3], w[3], fv[3], v[3];
     for (int k = 0; k < 3; k++) {
@@ -629,12 +650,11 @@ static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
 #endif
     }
     if (vdrive) {
-        double a[VW], b[VW], ft = 0.0, pt = 0.0;
-        vst(a, Ftot);
-        vst(b, Ptot);
+        Lanes a = {.v = Ftot}, b = {.v = Ptot};
+        double ft = 0.0, pt = 0.0;
         for (int l = 0; l < VW; l++) {
-            ft += a[l];
-            pt += b[l];
+            ft += a.d[l];
+            pt += b.d[l];
         }
         c->sc.F_total = ft;
         c->sc.P_total = pt;
@@ -645,9 +665,9 @@ static double vsum_range(const double *a, int n) {
     V acc = vzero();
     int i = 0;
     for (; i + VW <= n; i += VW) acc = acc + vld(a + i);
-    double t[VW], s = 0.0;
-    vst(t, acc);
-    for (int l = 0; l < VW; l++) s += t[l];
+    Lanes t = {.v = acc};
+    double s = 0.0;
+    for (int l = 0; l < VW; l++) s += t.d[l];
     for (; i < n; i++) s += a[i];
     return s;
 }
