@@ -36,12 +36,20 @@ void dopri_reset(DopriState *s, double t0, double h0) {
 /* The stage combinations run over an even count (m = n & ~1) with
  * restrict arguments so that -O2 vectorises them (two doubles per SSE2
  * instruction); the odd last component, if any, follows in scalar code.
- * Where GCC builds for x86-64 Linux they are also compiled for AVX2 and
+ * Where GCC builds for x86-64 with glibc they are also compiled for AVX2 and
  * AVX-512 (target_clones: the dynamic loader picks one per process from
  * the CPU, an ifunc, so there is no dispatch state of ours); each lane does
- * the same arithmetic in the same order, so every clone gives the same bits. */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(LSS_NO_SIMD) && \
-    !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)  /* ifunc resolvers run before the sanitizers start */
+ * the same arithmetic in the same order, so every clone gives the same bits.
+ * Not with other C libraries: ifuncs need glibc's loader (musl's has none).
+ * Not under ThreadSanitizer: GCC instruments the resolver it generates
+ * (__tsan_func_entry, whatever attributes the function carries), and the
+ * loader runs resolvers while it relocates the executable, before the TSan
+ * runtime has started: a TSan build linked with the core crashed in comb1's
+ * resolver at start-up (GCC 12). AddressSanitizer builds keep the clones
+ * (their resolvers run fine); the vector right-hand sides (chain_simd.h) are
+ * picked per instance, no ifunc, and run under every sanitizer. */
+#if defined(__GNUC__) && __GNUC__ >= 7 && !defined(__clang__) && !defined(__INTEL_COMPILER) && \
+    defined(__x86_64__) && defined(__GLIBC__) && !defined(LSS_NO_SIMD) && !defined(__SANITIZE_THREAD__)
 #define STAGE_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define STAGE_CLONES
