@@ -42,6 +42,16 @@ def path_available(fmu_file, path: int) -> bool:
         return int(s.get("solver.vector_path_used")) == path
 
 
+@pytest.fixture(scope="session")
+def best_vector_path(fmu_file) -> int:
+    """The widest path the -O2 FMU runs on this CPU (what solver.vector_path
+    = 0, auto, picks)."""
+    from lss_fmu.runner import ChainSimulator
+    with ChainSimulator(fmu_file) as s:
+        s.start({"layout.name": "demo", "solver.vector_path": 0})
+        return int(s.get("solver.vector_path_used"))
+
+
 @pytest.fixture(scope="session", params=sorted(VECTOR_PATHS), ids=list(VECTOR_PATHS.values()))
 def path_sim(request, fmu_file):
     """A simulator forced onto one right-hand-side path (solver.vector_path
