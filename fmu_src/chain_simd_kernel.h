@@ -11,6 +11,18 @@
 
 #define KI static inline __attribute__((always_inline))
 
+#if VW == 8 && defined(__SANITIZE_ADDRESS__)
+/* No stack protector in the AVX-512 kernels of AddressSanitizer builds (its
+ * redzones guard the stack better): with both, GCC 12 misplaces the frame
+ * on ASan's fake stack (detect_stack_use_after_return) by the guard's 32
+ * bytes, and the 64-byte locals (V R[9] in k_chunk, declared __m512d) sat at
+ * 32 mod 64: an ASan SEGV at every level, -O0 to -O2, with
+ * -fstack-protector-strong (Ubuntu's default). Later GCCs count the guard
+ * (asan.cc, asan_emit_stack_protection). This file's scope only: the
+ * including file pushes and pops the options. */
+#pragma GCC optimize("no-stack-protector")
+#endif
+
 /* --- the vector type and its few operations --------------------------------- */
 /* vld and vst are unaligned (loadu, storeu) and touch only the workspace's
  * arrays (chain_simd.c: NP = NW + W slots each, so a chunk at i < NW and the
