@@ -47,7 +47,8 @@
  * exists. Sanitizer builds run them too (tests/test_c_harness.py,
  * tests/test_vector_sanitizers.py). The kernels keep lanes they treat one by
  * one in unions with the vector type (Lanes in chain_simd_kernel.h), never in
- * bare double arrays: see there for the ASan crash this cured. */
+ * bare double arrays, and the AVX-512 one has no stack protector under ASan:
+ * see there for the two crashes (GCC's, under ASan's fake stack) these avoid. */
 #if defined(__GNUC__) && __GNUC__ >= 7 && !defined(__clang__) && !defined(__INTEL_COMPILER) && \
     defined(__x86_64__) && !defined(LSS_NO_SIMD)
 #define LSS_HAVE_SIMD 1
