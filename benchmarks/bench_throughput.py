@@ -83,7 +83,7 @@ class Core:
 
 
 def measure(core: Core, layout: str, tol: float, settle: float, window: float, horizon: float,
-            params=None, accuracy=True, repeat=1) -> dict:
+            params=None, accuracy=True, repeat=1, ref_tol=None) -> dict:
     n_settle, n_win, n_hor = (int(round(x / COMM)) for x in (settle, window, horizon))
     n_win = max(n_hor, n_win // n_hor * n_hor)
     # throughput (best of `repeat` runs)
@@ -106,8 +106,10 @@ def measure(core: Core, layout: str, tol: float, settle: float, window: float, h
     if not accuracy:
         return res
     # reference at tol/100: continuous, with its states at the restart points
-    ref_tol = tol / 100
-    c = core.new(layout, ref_tol, params)
+    # the reference: the core's DOPRI5 (whatever method is measured) at ref_tol
+    ref_tol = ref_tol or tol / 100
+    ref_params = {k: v for k, v in (params or {}).items() if k != "solver.method"} or None
+    c = core.new(layout, ref_tol, ref_params)
     core.run(c, n_settle)
     states, ref = [], []
     for k in range(n_win // n_hor):
@@ -169,7 +171,8 @@ def repeated_layout(name: str, k: int, out_dir) -> str:
     return str(path)
 
 
-def scaling_fixed_mix(core: Core, name: str, ks, tol: float, settle: float, window: float, repeat: int) -> list:
+def scaling_fixed_mix(core: Core, name: str, ks, tol: float, settle: float, window: float, repeat: int,
+                      params=None) -> list:
     """Throughput of `name` repeated k times: cost against carts at a fixed
     mix of track elements (the built-in layouts differ in their share of
     curves, which costs more per cart than straight track). The pretension
@@ -182,7 +185,7 @@ def scaling_fixed_mix(core: Core, name: str, ks, tol: float, settle: float, wind
     with tempfile.TemporaryDirectory() as d:
         for k in ks:
             r = measure(core, repeated_layout(name, k, d), tol, settle, window, 0.5,
-                        params={"chain.pretension": d0 * k}, accuracy=False, repeat=repeat)
+                        params={**(params or {}), "chain.pretension": d0 * k}, accuracy=False, repeat=repeat)
             r["layout"] = f"{name}x{k}"
             print(fmt(r), flush=True)
             out.append(r)
@@ -212,17 +215,23 @@ def main(argv=None):
     ap.add_argument("--mix", default=None, help="also: scaling at a fixed mix, this layout repeated --mix-k times")
     ap.add_argument("--mix-k", type=int, nargs="+", default=[1, 2, 4, 8, 13])
     ap.add_argument("--mix-window", type=float, default=1.0)
+    ap.add_argument("--ref-tol", type=float, default=None,
+                    help="tolerance of the reference (default: tol / 100); the reference is always DOPRI5")
+    ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
+                    help="other parameters, e.g. solver.method=1 solver.vector_path=1 (issue 19)")
     ap.add_argument("--lib", default=None, help="core library to measure (default: build the current one)")
     ap.add_argument("--label", default="current")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     core = Core(a.lib)
+    params = {kv.split("=", 1)[0]: float(kv.split("=", 1)[1]) for kv in a.set}
     print(machine())
     results = []
     for tol in a.tol:
         for lay in a.layouts:
             r = measure(core, lay, tol, a.settle, a.window or WINDOWS.get(lay, 2.0), a.horizon,
-                        accuracy=not a.no_accuracy, repeat=a.repeat)
+                        params=params or None, accuracy=not a.no_accuracy, repeat=a.repeat, ref_tol=a.ref_tol)
+            r.update(params=params)
             print(fmt(r), flush=True)
             results.append(r)
     out = dict(label=a.label, machine=machine(), results=results)
@@ -233,7 +242,7 @@ def main(argv=None):
             print(f"tol {tol:.0e}: CPU ~ carts^{sc['exponent']:.3f}; cost per cart-second "
                   f"{', '.join(f'{1e3 * x:.2f} ms' for x in sc['cost_per_cart_s'])} (spread {100 * sc['spread']:.0f} %)")
     if a.mix:
-        mix = scaling_fixed_mix(core, a.mix, a.mix_k, a.tol[0], a.settle, a.mix_window, a.repeat)
+        mix = scaling_fixed_mix(core, a.mix, a.mix_k, a.tol[0], a.settle, a.mix_window, a.repeat, params)
         sc = scaling(mix)
         out["mix"] = dict(layout=a.mix, tol=a.tol[0], results=mix, scaling=sc)
         print(f"{a.mix} repeated {a.mix_k} times, tol {a.tol[0]:.0e}: CPU ~ carts^{sc['exponent']:.3f}; cost per "

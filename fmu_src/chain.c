@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "chain_internal.h"
+#include "chain_simd.h"
 #include "params.h"
 
 #define GRAVITY 9.81
@@ -65,7 +66,8 @@ static int allocate(Chain *c) {
     c->sc.ddelta = xcalloc(c, ns, sizeof(double), &fail);
     c->sc.force = xcalloc(c, ns, sizeof(double), &fail);
     c->sc.cart = xcalloc(c, N, sizeof(CartScratch), &fail);
-    for (int k = 0; k < 7; k++) c->ode.k[k] = xcalloc(c, ny, sizeof(double), &fail);
+    int nk = c->m.method == LSS_METHOD_DOP853 ? DOPRI_NK : 7;
+    for (int k = 0; k < nk; k++) c->ode.k[k] = xcalloc(c, ny, sizeof(double), &fail);
     c->ode.ytmp = xcalloc(c, ny, sizeof(double), &fail);
     c->ode.ynew = xcalloc(c, ny, sizeof(double), &fail);
     c->dy_scratch = xcalloc(c, ny, sizeof(double), &fail);
@@ -79,9 +81,11 @@ static int allocate(Chain *c) {
 void chain_free(Chain *c) {
     if (!c) return;
     LSSAlloc a = c->m.alloc;
+    chain_simd_free(c);
     void *ptrs[] = {c->st.y, c->st.s_hint, c->st.v_onset, c->st.delta_prev, c->st.ddelta_prev,
                     c->sc.delta, c->sc.ddelta, c->sc.force, c->sc.cart,
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
+                    c->ode.k[7], c->ode.k[8], c->ode.k[9], c->ode.k[10], c->ode.k[11], c->ode.k[12],
                     c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel,
                     c->m.mass, c->m.inertia};
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
@@ -172,6 +176,7 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
                  m->s_start, m->track.length);
         goto fail;
     }
+    m->method = p->solver_method;
     cart_geometry_init(&m->g, &m->type, m->track.length / m->n_carts, p->track_guide_gap, p->cart_mass_factor);
     if (allocate(c)) {
         snprintf(err, errlen, "out of memory for a chain of %d carts", m->n_carts);
@@ -184,6 +189,10 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
         double f = effects_mass_factor(p, i, m->transducer);
         m->mass[i] = m->g.mass * f;
         for (int k = 0; k < 3; k++) m->inertia[3 * i + k] = m->g.inertia[k] * f;
+    }
+    if (chain_simd_init(c, p->solver_vector_path)) {
+        snprintf(err, errlen, "out of memory for a chain of %d carts", m->n_carts);
+        goto fail;
     }
     chain_set_inputs(c, p);
     double v0 = p->chain_v_init >= 0 ? p->chain_v_init : p->drive_v_ref;
@@ -227,12 +236,14 @@ void chain_set_inputs(Chain *c, const LSSParams *p) {
 void chain_start_memory(Chain *c) {
     const ChainModel *m = &c->m;
     chain_rhs(c, c->st.ode.t, c->st.y, c->ode.k[0]);
+    chain_simd_sync(c);   /* the vector path fills the scalar scratch on demand */
     c->st.ode.n_rhs = 1;
     for (int k = 0; k < N_SLOT * m->n_carts; k++) {
         c->st.v_onset[k] = c->sc.delta[k] > 0 ? m->v_min : 0.0;
         c->st.delta_prev[k] = c->sc.delta[k];
         c->st.ddelta_prev[k] = c->sc.ddelta[k];
     }
+    chain_simd_invalidate(c);
     c->st.ode.fsal_valid = 1;
     c->scratch_at_state = 1;
 }
@@ -340,4 +351,5 @@ void chain_state_load(Chain *c, const double *buf) {
     memcpy(c->ode.k[0], p, sizeof(double) * (size_t)c->m.n_y);
     o->fsal_valid = buf[11] != 0;
     c->scratch_at_state = 0;
+    chain_simd_invalidate(c);
 }

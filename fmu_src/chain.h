@@ -77,6 +77,7 @@ typedef struct ChainModel {
     double v_min, mu_roll, F_max, motor_length, pretension, preload, gravity;
     double tol, h_max;
     double s_start;                   /* arc position of cart 0's axle as assembled, m */
+    int method;                       /* LSS_METHOD_*: the embedded pair */
     Effects fx;                       /* the effects catalogue (effects.h) */
     double *mass;                     /* [N] mass of each cart, kg (g.mass unless the masses differ) */
     double *inertia;                  /* [3N] its principal moments, kg m^2 */
@@ -124,6 +125,15 @@ typedef struct ChainState {
     double v_ref, Kp, Ki;             /* inputs and tunables in force */
 } ChainState;
 
+/* Right-hand-side code paths (solver.vector_path): the scalar one runs
+ * everywhere; the vector ones (chain_simd*.c) exist in x86-64 builds with
+ * GCC and run where the CPU has the instructions. */
+enum { LSS_PATH_AUTO = 0, LSS_PATH_SCALAR = 1, LSS_PATH_AVX2 = 2, LSS_PATH_AVX512 = 3 };
+/* Pairs (solver.method). */
+enum { LSS_METHOD_DOPRI5 = 0, LSS_METHOD_DOP853 = 1 };
+
+struct ChainSimd;
+
 typedef struct {
     ChainModel m;
     ChainState st;
@@ -131,6 +141,8 @@ typedef struct {
     Dopri ode;                        /* solver set-up and workspace */
     double *dy_scratch;               /* [n_y] for evaluations outside the solver */
     int scratch_at_state;             /* the scratch describes st.y as it is now */
+    int path;                         /* LSS_PATH_* in use, fixed at creation */
+    struct ChainSimd *simd;           /* the vector paths' workspace (NULL on the scalar path) */
 } Chain;
 
 /* Builds the chain from validated parameters: layout, carts, initial state.
@@ -192,5 +204,10 @@ int chain_load_layout(const char *name, const char *resource_dir, LayoutSpec *sp
 double drive_overlap(const ChainModel *m, double s_plate);
 /* PI controller: thrust command per motor and the integrator derivative. */
 double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot);
+/* Thrust F on a cart whose axle is at arc length s_axle (the command's
+ * share under the motors it covers, with the ripple if on); *hint is the
+ * cart's motor hint. Returns 0 when no motor is under its plate (then the
+ * cart gets no thrust at all). */
+int drive_thrust(const ChainModel *m, double s_axle, int *hint, double F_cmd, double *F);
 
 #endif

@@ -1,7 +1,7 @@
 /* The outputs: the transducer cart's signals (its force sensors with their
  * gain and offset errors, effects.c), the chain and drive
  * quantities, the energy bookkeeping and the solver statistics. */
-#include "chain_internal.h"
+#include "chain_simd.h"
 
 static double mechanical_energy(const Chain *c) {
     const ChainModel *m = &c->m;
@@ -27,6 +27,7 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
         chain_rhs(c, c->st.ode.t, c->st.y, c->dy_scratch);
         c->scratch_at_state = 1;
     }
+    chain_simd_sync(c);
     int tr = m->transducer;
     const double *f = sc->force + N_SLOT * tr + SLOT_WHEEL, *ws = sc->cart[tr].wheel_speed;
     o->transducer_joint_F_x = sc->jointF[0];
@@ -64,4 +65,5 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->chain_preload = m->preload;
     o->drive_n_motors = m->track.n_motors;
     o->cart_r_drive = m->g.r_drive;
+    o->solver_vector_path_used = c->path;
 }

@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "chain_internal.h"
+#include "chain_simd.h"
 
 #define RELAX_INTERVAL 0.001    /* s between looks at the kinetic energy */
 #define RELAX_COR 0.5           /* the contact damping during relaxation */
@@ -32,6 +33,7 @@ static void quench(Chain *c) {
     for (int i = 0; i < c->m.n_carts; i++) memset(c->st.y + CART_NY * i + 7, 0, 6 * sizeof(double));
     c->st.ode.fsal_valid = 0;
     c->scratch_at_state = 0;
+    chain_simd_invalidate(c);   /* the vector path's copy of the state */
 }
 
 int chain_relax(Chain *c, double T, char *err, size_t errlen) {

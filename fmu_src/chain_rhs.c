@@ -2,9 +2,9 @@
  * wheels against the track (and its running resistance), then the speed
  * controller (it needs the mean speed of all carts), the joints, the motors,
  * and Newton-Euler per cart. Cost is linear in the number of carts. */
-#include "chain_internal.h"
+#include "chain_simd.h"
 
-void chain_rhs(Chain *c, double t, const double *y, double *dy) {
+static void chain_rhs_scalar(Chain *c, double t, const double *y, double *dy) {
     const ChainModel *m = &c->m;
     ChainScratch *sc = &c->sc;
     int N = m->n_carts;
@@ -39,4 +39,13 @@ void chain_rhs(Chain *c, double t, const double *y, double *dy) {
     sc->v_mean = v_mean;
     sc->F_cmd = F_cmd;
     sc->n_rhs++;
+}
+
+/* The path fixed at the instance's creation (chain_simd.h). */
+void chain_rhs(Chain *c, double t, const double *y, double *dy) {
+    switch (c->path) {
+    case LSS_PATH_AVX512: chain_rhs_avx512(c, y, dy); break;
+    case LSS_PATH_AVX2: chain_rhs_avx2(c, y, dy); break;
+    default: chain_rhs_scalar(c, t, y, dy); break;
+    }
 }

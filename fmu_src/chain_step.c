@@ -5,7 +5,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "chain_simd.h"
 
 /* A contact that closed within the step gets its onset velocity, interpolated
  * at the crossing; an open one forgets. Returns 1 if the right-hand side at
@@ -42,6 +42,7 @@ static int accepted(void *ctx, double t, double *y) {
     Chain *c = ctx;
     int changed = 0;
     (void)t;
+    chain_simd_sync(c);
     for (int i = 0; i < c->m.n_carts; i++) {
         double *q = y + CART_NY * i + 3;
         double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
@@ -52,12 +53,15 @@ static int accepted(void *ctx, double t, double *y) {
         c->st.s_hint[i] = c->sc.cart[i].s;
     }
     /* the scratch holds the last stage, evaluated at the new point */
-    return update_contact_memory(c) || changed;
+    changed = update_contact_memory(c) || changed;
+    chain_simd_invalidate(c);
+    return changed;
 }
 
 void chain_solver_init(Chain *c) {
     Dopri *d = &c->ode;
     d->n = c->m.n_y;
+    d->method = c->m.method == LSS_METHOD_DOP853 ? DOPRI_DOP853 : DOPRI_DOPRI5;
     d->rhs = rhs;
     d->accepted = accepted;
     d->ctx = c;

@@ -35,32 +35,50 @@ void dopri_reset(DopriState *s, double t0, double h0) {
 
 /* The stage combinations run over an even count (m = n & ~1) with
  * restrict arguments so that -O2 vectorises them (two doubles per SSE2
- * instruction); the odd last component, if any, follows in scalar code. */
-static void comb1(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0) {
+ * instruction); the odd last component, if any, follows in scalar code.
+ * Where GCC builds for x86-64 with glibc they are also compiled for AVX2 and
+ * AVX-512 (target_clones: the dynamic loader picks one per process from
+ * the CPU, an ifunc, so there is no dispatch state of ours); each lane does
+ * the same arithmetic in the same order, so every clone gives the same bits.
+ * Not with other C libraries: ifuncs need glibc's loader (musl's has none).
+ * Not under ThreadSanitizer: GCC instruments the resolver it generates
+ * (__tsan_func_entry, whatever attributes the function carries), and the
+ * loader runs resolvers while it relocates the executable, before the TSan
+ * runtime has started: a TSan build linked with the core crashed in comb1's
+ * resolver at start-up (GCC 12). AddressSanitizer builds keep the clones
+ * (their resolvers run fine); the vector right-hand sides (chain_simd.h) are
+ * picked per instance, no ifunc, and run under every sanitizer. */
+#if defined(__GNUC__) && __GNUC__ >= 7 && !defined(__clang__) && !defined(__INTEL_COMPILER) && \
+    defined(__x86_64__) && defined(__GLIBC__) && !defined(LSS_NO_SIMD) && !defined(__SANITIZE_THREAD__)
+#define STAGE_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define STAGE_CLONES
+#endif
+STAGE_CLONES static void comb1(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + b0 * k0[i];
     for (int i = m; i < n; i++) o[i] = y[i] + b0 * k0[i];
 }
-static void comb2(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb2(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i]);
 }
-static void comb3(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb3(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1, double b2, const double *restrict k2) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i]);
 }
-static void comb4(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb4(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1, double b2, const double *restrict k2, double b3,
                   const double *restrict k3) {
     int m = n & ~1;
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i]);
 }
-static void comb5(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
+STAGE_CLONES static void comb5(int n, double *restrict o, const double *restrict y, double b0, const double *restrict k0,
                   double b1, const double *restrict k1, double b2, const double *restrict k2, double b3,
                   const double *restrict k3, double b4, const double *restrict k4) {
     int m = n & ~1;
@@ -68,7 +86,7 @@ static void comb5(int n, double *restrict o, const double *restrict y, double b0
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i] + b4 * k4[i]);
 }
 /* |sum g_j k_j| / (tol (scale + rel max(|y|, |y_new|))) per component */
-static void err_ratio(int n, double *restrict o, const double *restrict y, const double *restrict yn,
+STAGE_CLONES static void err_ratio(int n, double *restrict o, const double *restrict y, const double *restrict yn,
                       const double *restrict sc, const double *restrict rl, double tol, const double *g,
                       const double *restrict k0, const double *restrict k2, const double *restrict k3,
                       const double *restrict k4, const double *restrict k5, const double *restrict k6) {
@@ -111,6 +129,113 @@ static double trial(Dopri *d, const double *y, double t, double h) {
     return err;
 }
 
+
+/* --- DOP853 ----------------------------------------------------------------
+ * Dormand and Prince's explicit pair of order 8 with error estimators of
+ * orders 5 and 3 (P. J. Prince and J. R. Dormand, High order embedded
+ * Runge-Kutta formulae, J. Comput. Appl. Math. 7 (1981) 67-75; in the form
+ * of E. Hairer, S. P. Norsett and G. Wanner, Solving Ordinary Differential
+ * Equations I, 2nd ed., Springer 1993, section II.10, and their code
+ * DOP853). The coefficients below reproduce that published tableau (12
+ * stages, the 13th evaluation at the new point is the next step's first);
+ * they are printed to 17 significant digits, with the zero entries left out.
+ * Hairer's combined error estimate per component,
+ *     err = |e5|^2 / sqrt(e5^2 + 0.01 e3^2),
+ * is judged in the core's max norm and weights, with the core's
+ * controller at exponent 1/8 (no PI term), as in DOP853. */
+static const double D8_C[12] = {0.0, 0.05260015195876773, 0.0789002279381516, 0.1183503419072274, 0.2816496580927726, 0.3333333333333333, 0.25, 0.3076923076923077, 0.6512820512820513, 0.6, 0.8571428571428571, 1.0};
+/* row i: the nonzero a_ij, j < i, with their j */
+static const int D8_AN[12] = {0, 1, 2, 2, 3, 3, 4, 5, 6, 7, 8, 9};
+static const int D8_AJ[12][9] = {{0}, {0}, {0, 1}, {0, 2}, {0, 2, 3}, {0, 3, 4}, {0, 3, 4, 5}, {0, 3, 4, 5, 6}, {0, 3, 4, 5, 6, 7}, {0, 3, 4, 5, 6, 7, 8}, {0, 3, 4, 5, 6, 7, 8, 9}, {0, 3, 4, 5, 6, 7, 8, 9, 10}};
+static const double D8_A[12][9] = {{0}, {0.05260015195876773},
+    {0.0197250569845379, 0.0591751709536137},
+    {0.02958758547680685, 0.08876275643042054},
+    {0.2413651341592667, -0.8845494793282861, 0.924834003261792},
+    {0.037037037037037035, 0.17082860872947386, 0.12546768756682242},
+    {0.037109375, 0.17025221101954405, 0.06021653898045596, -0.017578125},
+    {0.03709200011850479, 0.17038392571223998, 0.10726203044637328, -0.015319437748624402, 0.008273789163814023},
+    {0.6241109587160757, -3.3608926294469414, -0.868219346841726, 27.59209969944671, 20.154067550477894, -43.48988418106996},
+    {0.47766253643826434, -2.4881146199716677, -0.590290826836843, 21.230051448181193, 15.279233632882423, -33.28821096898486, -0.020331201708508627},
+    {-0.9371424300859873, 5.186372428844064, 1.0914373489967295, -8.149787010746927, -18.52006565999696, 22.739487099350505, 2.4936055526796523, -3.0467644718982196},
+    {2.273310147516538, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636}};
+/* b_j, e5_j, e3_j of the stages 1, 6..12 (the others are zero) */
+static const int D8_J[8] = {0, 5, 6, 7, 8, 9, 10, 11};
+static const double D8_B[8] = {0.054293734116568765, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259};
+static const double D8_E5[8] = {0.01312004499419488, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294};
+static const double D8_E3[8] = {-0.18980075407240762, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082};
+
+/* o (+)= a0 k0 + a1 k1 + a2 k2 (+ a3 k3) in one pass; first: o = y + ... */
+STAGE_CLONES static void acc4(int n, double *restrict o, const double *restrict y, int first, int na,
+                              const double *a, const double *restrict k0, const double *restrict k1,
+                              const double *restrict k2, const double *restrict k3) {
+    double a0 = a[0], a1 = na > 1 ? a[1] : 0.0, a2 = na > 2 ? a[2] : 0.0, a3 = na > 3 ? a[3] : 0.0;
+    if (first && na == 4)
+        for (int i = 0; i < n; i++) o[i] = y[i] + (a0 * k0[i] + a1 * k1[i] + a2 * k2[i] + a3 * k3[i]);
+    else if (first)
+        for (int i = 0; i < n; i++) o[i] = y[i] + (a0 * k0[i] + a1 * k1[i] + a2 * k2[i]);
+    else if (na == 4)
+        for (int i = 0; i < n; i++) o[i] += a0 * k0[i] + a1 * k1[i] + a2 * k2[i] + a3 * k3[i];
+    else
+        for (int i = 0; i < n; i++) o[i] += a0 * k0[i] + a1 * k1[i] + a2 * k2[i];
+}
+
+/* o = y + sum_j a_j k_j over the listed stages (na of them), four per pass */
+static void combn(int n, double *o, const double *y, int na, const double *a, double *const *k) {
+    for (int j = 0; j < na; j += 4) {
+        int m = na - j < 4 ? na - j : 4;
+        const double *k1 = m > 1 ? k[j + 1] : k[j], *k2 = m > 2 ? k[j + 2] : k[j], *k3 = m > 3 ? k[j + 3] : k[j];
+        acc4(n, o, y, j == 0, m, a + j, k[j], k1, k2, k3);
+    }
+}
+
+/* the eight stages that carry b, e5 and e3 */
+STAGE_CLONES static void err853(int n, double *restrict o, const double *restrict y, const double *restrict yn,
+                                const double *restrict sc, const double *restrict rl, double tol, double h,
+                                double *const *k) {
+    const double *restrict k0 = k[0], *restrict k5 = k[5], *restrict k6 = k[6], *restrict k7 = k[7];
+    const double *restrict k8 = k[8], *restrict k9 = k[9], *restrict k10 = k[10], *restrict k11 = k[11];
+    const double *E5 = D8_E5, *E3 = D8_E3;
+    for (int i = 0; i < n; i++) {
+        double e5 = h * (E5[0] * k0[i] + E5[1] * k5[i] + E5[2] * k6[i] + E5[3] * k7[i] + E5[4] * k8[i] +
+                         E5[5] * k9[i] + E5[6] * k10[i] + E5[7] * k11[i]);
+        double e3 = h * (E3[0] * k0[i] + E3[1] * k5[i] + E3[2] * k6[i] + E3[3] * k7[i] + E3[4] * k8[i] +
+                         E3[5] * k9[i] + E3[6] * k10[i] + E3[7] * k11[i]);
+        double ay = fabs(y[i]), an = fabs(yn[i]);
+        double den = tol * (sc[i] + rl[i] * (ay > an ? ay : an));
+        double d = sqrt(e5 * e5 + 0.01 * e3 * e3);
+        o[i] = d > 0.0 ? fabs(e5) / den * (fabs(e5) / d) : 0.0;
+    }
+}
+
+/* One DOP853 trial step from (t, y) with k[0] = f(t, y): the new point in
+ * ynew, and the error norm (NaN/inf if the trial turned non-finite). The
+ * 13th evaluation (at the new point) is left to the caller: a rejected
+ * step does not need it. */
+static double trial853(Dopri *d, const double *y, double t, double h) {
+    int n = d->n;
+    double **k = d->k, *yt = d->ytmp, *yn = d->ynew;
+    double a[9];
+    double *kk[9];
+    for (int s = 1; s < 12; s++) {
+        for (int j = 0; j < D8_AN[s]; j++) {
+            a[j] = h * D8_A[s][j];
+            kk[j] = k[D8_AJ[s][j]];
+        }
+        combn(n, yt, y, D8_AN[s], a, kk);
+        d->rhs(d->ctx, t + D8_C[s] * h, yt, k[s]);
+    }
+    for (int j = 0; j < 8; j++) {
+        a[j] = h * D8_B[j];
+        kk[j] = k[D8_J[j]];
+    }
+    combn(n, yn, y, 8, a, kk);
+    err853(n, yt, y, yn, d->scale, d->rel, d->tol, h, k);
+    double err = 0.0;
+    for (int i = 0; i < n; i++)
+        if (!(yt[i] <= err)) err = yt[i];
+    return err;
+}
+
 int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err, size_t errlen) {
     int n = d->n;
     double span = fabs(t_end) + 1.0;
@@ -138,6 +263,7 @@ int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err
             h = t_end - st->t;
             last = 1;
         }
+        const int d853 = d->method == DOPRI_DOP853;
         for (;;) {
             if (++trials > max_trials) {
                 snprintf(err, errlen, "more than %ld internal steps (the limit for this step) at t = %.9g s, "
@@ -149,8 +275,8 @@ int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err
                 snprintf(err, errlen, "step size %g s is below the resolution of the time t = %.17g s", h, st->t);
                 return 1;
             }
-            double e = trial(d, y, st->t, h);
-            st->n_rhs += 6;
+            double e = d853 ? trial853(d, y, st->t, h) : trial(d, y, st->t, h);
+            st->n_rhs += d853 ? 11 : 6;
             if (!isfinite(e)) {
                 st->n_rejected++;
                 h *= 0.25;
@@ -162,18 +288,24 @@ int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err
                 }
                 continue;
             }
-            /* Hairer's PI controller (beta = 0.04) */
-            double fac11 = pow(e > 1e-10 ? e : 1e-10, 0.17);
+            /* Hairer's PI controller (beta = 0.04); DOP853: exponent 1/8, no PI term */
+            double fac11 = pow(e > 1e-10 ? e : 1e-10, d853 ? 0.125 : 0.17);
             if (e <= 1.0) {
-                double fac = fac11 / pow(st->err_prev, 0.04) / 0.9;
+                double fac = (d853 ? fac11 : fac11 / pow(st->err_prev, 0.04)) / 0.9;
                 fac = fac < 0.2 ? 0.2 : (fac > 10.0 ? 10.0 : fac);
                 double h_new = h / fac;
                 st->err_prev = e > 1e-4 ? e : 1e-4;
                 st->t = last ? t_end : st->t + h;
                 memcpy(y, d->ynew, sizeof(double) * (size_t)n);
+                int last_k = 6;
+                if (d853) {  /* the 13th evaluation, at the new point (the next step's first) */
+                    d->rhs(d->ctx, st->t, y, d->k[12]);
+                    st->n_rhs++;
+                    last_k = 12;
+                }
                 double *tmp = d->k[0];
-                d->k[0] = d->k[6];
-                d->k[6] = tmp;
+                d->k[0] = d->k[last_k];
+                d->k[last_k] = tmp;
                 st->n_steps++;
                 st->h_last = h;
                 st->h = last ? fmax(fmin(h_new, h_prop), h) : h_new;

@@ -1,13 +1,19 @@
 /* Dormand-Prince 5(4) with PI step-size control, landing exactly on a given
- * end time. Generic over the right-hand side so that the chain and the
- * single-impact harness of the contact-law checks use the very same solver. */
+ * end time; or (method DOPRI_DOP853) Dormand and Prince's 8th-order pair
+ * DOP853 with the same landing and step control. Generic over the
+ * right-hand side so that the chain and the single-impact harness of the
+ * contact-law checks use the very same solver. */
 #ifndef LSS_DOPRI5_H
 #define LSS_DOPRI5_H
 
 #include <stddef.h>
 
+enum { DOPRI_DOPRI5 = 0, DOPRI_DOP853 = 1 };
+#define DOPRI_NK 13              /* stage vectors: 7 for DOPRI5, 13 for DOP853 */
+
 typedef struct {
     int n;
+    int method;              /* DOPRI_DOPRI5 or DOPRI_DOP853 */
     void (*rhs)(void *ctx, double t, const double *y, double *dy);
     /* after each accepted step, with y the new state; returns 1 if it changed
      * y or the right-hand side (the FSAL derivative is then recomputed) */
@@ -16,7 +22,7 @@ typedef struct {
     const double *scale;   /* error scale per component: tol * (scale + rel * |y|) */
     const double *rel;
     double tol, h_max;
-    double *k[7], *ytmp, *ynew;  /* workspace, n each */
+    double *k[DOPRI_NK], *ytmp, *ynew;  /* workspace, n each (k[7..12] for DOP853 only, else NULL) */
 } Dopri;
 
 typedef struct {

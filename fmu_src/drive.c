@@ -109,24 +109,28 @@ double drive_command(const ChainModel *m, const ChainState *st, double v_mean, d
     return F;
 }
 
+int drive_thrust(const ChainModel *m, double s_axle, int *hint, double F_cmd, double *F) {
+    double s_plate = s_axle - (m->g.x_axle - m->g.x_motor), frac;
+    int lo = motor_from_hint(m, s_plate, hint);
+    if (!m->fx.ripple_on) {
+        frac = overlap_from(m, s_plate, lo);
+        *F = F_cmd * frac;
+    } else {
+        double rsum;
+        frac = overlap_ripple_from(m, s_plate, lo, &rsum);
+        *F = F_cmd * frac + m->fx.ripple_A * rsum;
+    }
+    return !(frac <= 0);
+}
+
 /* Thrust on cart i along the track tangent, at its motor point. */
 void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     const ChainModel *m = &c->m;
     ChainScratch *sc = &c->sc;
     CartScratch *cs = &sc->cart[i];
-    int rip = m->fx.ripple_on;
-    if (m->track.n_motors == 0 || (F_cmd == 0.0 && !rip)) return;
-    double s_plate = cs->s - (m->g.x_axle - m->g.x_motor), frac, F;
-    int lo = motor_from_hint(m, s_plate, &cs->motor);
-    if (!rip) {
-        frac = overlap_from(m, s_plate, lo);
-        F = F_cmd * frac;
-    } else {
-        double rsum;
-        frac = overlap_ripple_from(m, s_plate, lo, &rsum);
-        F = F_cmd * frac + m->fx.ripple_A * rsum;
-    }
-    if (frac <= 0) return;
+    if (m->track.n_motors == 0 || (F_cmd == 0.0 && !m->fx.ripple_on)) return;
+    double F;
+    if (!drive_thrust(m, cs->s, &cs->motor, F_cmd, &F)) return;
     const double *yi = y + CART_NY * i;
     const double *R = cs->R, *ww = cs->ww;
     double bm[3] = {m->g.x_motor, 0.0, m->g.z_motor}, rm[3], v[3], fv[3], tmp[3];

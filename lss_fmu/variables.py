@@ -199,6 +199,16 @@ VARIABLES: list[Var] = [
         "a chain that starts at rest (initial speed 0) first relaxes into its static equilibrium for this "
         "long (drive off, kinetic damping), before t = 0; 0: it starts as assembled",
         "s", 0.0, 0.0, 10.0),
+    # --- issue 19: the vectorised right-hand side and the 8th-order pair ------------------
+    Var("solver.vector_path", "Integer", P, "fixed",
+        "right-hand-side code path: 0 auto (the widest this CPU runs), 1 scalar, 2 AVX2, 3 AVX-512; "
+        "a path the CPU or the build lacks falls back to the next narrower one (see solver.vector_path_used)",
+        start=0, min=0, max=3),
+    Var("solver.method", "Integer", P, "fixed",
+        "embedded Runge-Kutta pair: 0 Dormand-Prince 5(4), 1 Dormand-Prince 8(5,3) (DOP853)",
+        start=0, min=0, max=1),
+    Var("solver.vector_path_used", "Integer", CP, "fixed",
+        "right-hand-side code path in use: 1 scalar, 2 AVX2, 3 AVX-512"),
 ]
 
 BY_NAME = {v.name: v for v in VARIABLES}

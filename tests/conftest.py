@@ -27,3 +27,46 @@ def sim(fmu_file):
 @pytest.fixture
 def data_dir() -> Path:
     return DATA
+
+
+# --- the right-hand-side paths (issue 19) --------------------------------------------
+VECTOR_PATHS = {1: "scalar", 2: "avx2", 3: "avx512"}
+
+
+def path_available(fmu_file, path: int) -> bool:
+    """Whether this CPU and build run solver.vector_path = path (the FMU
+    reports the path it took in solver.vector_path_used)."""
+    from lss_fmu.runner import ChainSimulator
+    with ChainSimulator(fmu_file) as s:
+        s.start({"layout.name": "demo", "solver.vector_path": path})
+        return int(s.get("solver.vector_path_used")) == path
+
+
+@pytest.fixture(scope="session")
+def best_vector_path(fmu_file) -> int:
+    """The widest path the -O2 FMU runs on this CPU (what solver.vector_path
+    = 0, auto, picks)."""
+    from lss_fmu.runner import ChainSimulator
+    with ChainSimulator(fmu_file) as s:
+        s.start({"layout.name": "demo", "solver.vector_path": 0})
+        return int(s.get("solver.vector_path_used"))
+
+
+@pytest.fixture(scope="session", params=sorted(VECTOR_PATHS), ids=list(VECTOR_PATHS.values()))
+def path_sim(request, fmu_file):
+    """A simulator forced onto one right-hand-side path (solver.vector_path
+    set in every run unless the test sets it): the physics tests run on each
+    path through it; skipped where the CPU lacks the path."""
+    from lss_fmu.runner import ChainSimulator
+    path = request.param
+    if not path_available(fmu_file, path):
+        pytest.skip(f"this CPU or build has no {VECTOR_PATHS[path]} path")
+
+    class PathSimulator(ChainSimulator):
+        def start(self, params=None, tolerance=None, start_time=0.0):
+            super().start({"solver.vector_path": path, **(params or {})}, tolerance, start_time)
+
+    s = PathSimulator(fmu_file)
+    s.vector_path = path
+    yield s
+    s.close()

@@ -1,14 +1,22 @@
 """The C harness (fmu_src/testing/test_harness.c) drives the FMI 2.0 API without fmpy,
 compiled together with the model sources:
 
-- under AddressSanitizer + UndefinedBehaviorSanitizer (LeakSanitizer on):
-  1000 instantiate / set / setup / initialise / step / reset / re-initialise /
+- under AddressSanitizer + UndefinedBehaviorSanitizer (LeakSanitizer on,
+  detect_stack_use_after_return on), built at -O0 and at -O1: 1000
+  instantiate / set / setup / initialise / step / reset / re-initialise /
   step / terminate / free cycles with wrong calls and every error path, 4
   instances on 4 threads, 300 corrupted serialized FMU states, every word of a
   serialized state set to NaN, +-inf, 0, -1, 1e300 in turn; no sanitizer
   report, every allocation returned through the freeMemory callback;
 - under ThreadSanitizer: instances stepped at once on several threads, no data
   race, the same results as one after another.
+
+Cycle k and thread k ask for right-hand-side path k % 4 (auto, scalar, AVX2,
+AVX-512): every build runs each vector path this CPU has (the -O2 FMU's
+choice), and the harness counts the paths it got. The sanitizer builds keep
+the vector kernels; only the TSan build leaves out the solver loops'
+target_clones (dopri5.c says why). tests/test_vector_sanitizers.py runs longer
+simulations of the sanitized sources on each path against the -O2 build.
 
 The longer leak check (10,000 cycles under valgrind or LSan) is
 tests/c/leakcheck.sh, outside `make test`.
@@ -73,11 +81,25 @@ def workdir(tmp_path_factory):
     return tmp_path_factory.mktemp("harness")
 
 
-def test_harness_under_asan_ubsan(workdir):
-    flags = ["-O1", "-fno-omit-frame-pointer", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
+def paths_used(stdout: str) -> dict:
+    """solver.vector_path_used counted by the harness: {1: scalar, 2: avx2, 3: avx512}."""
+    line = [ln for ln in stdout.splitlines() if ln.startswith("vector paths used:")][-1]
+    counts = dict(re.findall(r"(scalar|avx2|avx512) (\d+)", line))
+    return {1: int(counts["scalar"]), 2: int(counts["avx2"]), 3: int(counts["avx512"])}
+
+
+def assert_every_path_ran(stdout: str, best: int) -> None:
+    used = paths_used(stdout)
+    for p in (1, 2, 3):
+        assert (used[p] > 0) == (p <= best), (used, f"the -O2 FMU's widest path is {best}")
+
+
+@pytest.mark.parametrize("level", ["-O0", "-O1"])
+def test_harness_under_asan_ubsan(workdir, best_vector_path, level):
+    flags = [level, "-fno-omit-frame-pointer", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
     if not _sanitizer_works(flags, workdir):
         pytest.skip("the compiler has no AddressSanitizer/UBSan runtime")
-    exe = compile_harness(workdir / "harness_asan", flags)
+    exe = compile_harness(workdir / f"harness_asan{level}", flags)
     env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:detect_stack_use_after_return=1",
                UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1")
     res = subprocess.run([str(exe), resource_uri(), "--cycles", str(CYCLES), "--stop", str(STOP),
@@ -99,9 +121,10 @@ def test_harness_under_asan_ubsan(workdir):
     assert m, res.stdout[-2000:]
     words, *counts = map(int, m.groups())
     assert words > 1000 and sum(counts) > 5 * words
+    assert_every_path_ran(res.stdout, best_vector_path)
 
 
-def test_threads_under_tsan(workdir):
+def test_threads_under_tsan(workdir, best_vector_path):
     flags = ["-O1", "-fsanitize=thread"]
     if not _sanitizer_works(flags + ["-lpthread"], workdir):
         pytest.skip("the compiler has no ThreadSanitizer runtime")
@@ -113,6 +136,7 @@ def test_threads_under_tsan(workdir):
     assert "ThreadSanitizer" not in report, report[-4000:]
     assert res.returncode == 0, report[-4000:]
     assert "agree with one after another" in res.stdout
+    assert_every_path_ran(res.stdout, best_vector_path)  # the 4 threads: auto, scalar, AVX2, AVX-512
 
 
 # --- the layout fuzz target: corpus replay (and a short libFuzzer run with clang) -------------

@@ -8,6 +8,13 @@ import pytest
 
 from lss_fmu.layouts import load_track
 
+
+@pytest.fixture
+def sim(path_sim):
+    """Every test here runs on each right-hand-side path: scalar, AVX2,
+    AVX-512 (tests/conftest.py path_sim; skipped where the CPU lacks one)."""
+    return path_sim
+
 G = 9.81
 COAST = {"drive.Kp": 0.0, "drive.Ki": 0.0, "wheel.mu_roll": 0.0}
 ELASTIC = {f"contact.e_{k}": 1.0 for k in ("JA", "JR", "SW", "RW")}

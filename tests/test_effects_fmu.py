@@ -18,6 +18,13 @@ from lss_fmu.layouts import load_track
 from lss_fmu.runner import SimulationError
 from lss_fmu.variables import BY_NAME, FORCE_CHANNELS, VARIABLES
 
+
+@pytest.fixture
+def sim(path_sim):
+    """Every test here runs on each right-hand-side path: scalar, AVX2,
+    AVX-512 (tests/conftest.py path_sim; skipped where the CPU lacks one)."""
+    return path_sim
+
 G = 9.81
 X_AXLE = 0.40   # driving-wheel axle ahead of the CG, body x (docs/model.md, cart geometry)
 COAST = {"drive.Kp": 0.0, "drive.Ki": 0.0, "wheel.mu_roll": 0.0}

@@ -21,6 +21,11 @@
  *              -1, 1e300 in turn: refused with a message, or stepped to the
  *              right time (fmi2OK) or discarded; never a hang.
  *
+ * Cycle k (and thread k) asks for right-hand-side path k % 4
+ * (solver.vector_path: auto, scalar, AVX2, AVX-512), so that the sanitizer
+ * builds run every path this CPU has; the paths taken are counted and
+ * printed ("vector paths used: ...").
+ *
  * Memory comes from calloc/free callbacks that count live blocks; at the end
  * every block must have been returned. Every call expected to fail must
  * return the expected status and log a message. Exit code 0 when all checks
@@ -57,6 +62,7 @@ typedef struct {
 
 static atomic_long g_live, g_allocs, g_failures, g_bad_inputs, g_calls;
 static atomic_long g_outcome[6];  /* statuses returned to the bad inputs */
+static atomic_long g_path_used[4];  /* initialisations per solver.vector_path_used (1 scalar, 2 AVX2, 3 AVX-512) */
 static fmi2ValueReference g_out_vr[MAX_OUT];
 static int g_n_out;
 
@@ -138,16 +144,17 @@ static fmi2Component instantiate(Env *env, const fmi2CallbackFunctions *cb, cons
     return c;
 }
 
-/* Parameters of cycle k: every contact law, a range of speeds. Set before
- * fmi2SetupExperiment, as some masters do. */
+/* Parameters of cycle k: every contact law, a range of speeds, each
+ * right-hand-side path in turn. Set before fmi2SetupExperiment, as some
+ * masters do. */
 static void set_params(Env *env, fmi2Component c, int k) {
-    fmi2ValueReference vr_i = VR_CONTACT_MODEL, vr_s = VR_LAYOUT_NAME;
+    fmi2ValueReference vr_i[2] = {VR_CONTACT_MODEL, VR_SOLVER_VECTOR_PATH}, vr_s = VR_LAYOUT_NAME;
     fmi2ValueReference vr_r[3] = {VR_DRIVE_V_REF, VR_CONTACT_E_JA, VR_DRIVE_KP};
-    fmi2Integer model = 1 + k % 6;
+    fmi2Integer ints[2] = {1 + k % 6, k % 4};
     fmi2Real r[3] = {1.5 + 0.1 * (k % 10), 0.3 + 0.05 * (k % 7), 400.0 + k % 5};
     fmi2String layout = "demo";
     CALL(fmi2OK, fmi2SetString(c, &vr_s, 1, &layout));
-    CALL(fmi2OK, fmi2SetInteger(c, &vr_i, 1, &model));
+    CALL(fmi2OK, fmi2SetInteger(c, vr_i, 2, ints));
     CALL(fmi2OK, fmi2SetReal(c, vr_r, 3, r));
 }
 
@@ -169,6 +176,12 @@ static double init_and_run(Env *env, fmi2Component c, const Opts *o, int k, doub
     CALL(fmi2OK, fmi2GetReal(c, vr_l, 2, l));
     EXPECT(n >= 3 && l[0] > 0 && isfinite(l[1]), "initial unknowns: n_carts %d, length %g, v_mean %g", n, l[0], l[1]);
     CALL(fmi2OK, fmi2ExitInitializationMode(c));
+    fmi2ValueReference vr_p = VR_SOLVER_VECTOR_PATH_USED;
+    fmi2Integer path = 0;
+    CALL(fmi2OK, fmi2GetInteger(c, &vr_p, 1, &path));
+    EXPECT(path >= 1 && path <= 3 && (k % 4 == 0 || path <= k % 4), "cycle %d: vector path %d used for %d asked",
+           k, path, k % 4);
+    if (path >= 1 && path <= 3) atomic_fetch_add(&g_path_used[path], 1);
     int steps = (int)lround(o->stop / o->h);
     double t = 0.0;
     for (int i = 1; i <= steps; i++) {
@@ -177,7 +190,6 @@ static double init_and_run(Env *env, fmi2Component c, const Opts *o, int k, doub
         t = tn;
     }
     get_outputs(env, c, out);
-    (void)k;
     return t;
 }
 
@@ -636,6 +648,8 @@ int main(int argc, char **argv) {
     unlink(p1);
     unlink(p2);
     rmdir(o.tmpdir);
+    printf("vector paths used: scalar %ld, avx2 %ld, avx512 %ld\n", atomic_load(&g_path_used[1]),
+           atomic_load(&g_path_used[2]), atomic_load(&g_path_used[3]));
     long live = atomic_load(&g_live);
     EXPECT(live == 0, "%ld blocks allocated through the callbacks were never freed", live);
     printf("summary: cycles %d, FMI calls checked %ld, bad inputs %ld (error %ld, discard %ld, warning %ld, ok %ld), "
