@@ -64,7 +64,7 @@ def run_stages(out: Path) -> list[str]:
     rows = ["| variable | true | start | identified | 95 % interval |", "|---|---|---|---|---|"]
     for k, x0, x in zip(problem.free, res.x0, res.x):
         iv = ivs.get(k)
-        cell = "-" if iv is None else (f"{iv.lower:.3f} .. {iv.upper:.3f}" if iv.identifiable
+        cell = "-" if iv is None else (f"{iv.lower:.4g} .. {iv.upper:.4g}" if iv.identifiable
                                        else "not identifiable")
         rows.append(f"| {symbol(k)} | {true[k]:.4g} | {x0:.4g} | {x:.4g} | {cell} |")
     sections = [
