@@ -298,13 +298,18 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
                workers: int = 1, sensor_offset_std: Optional[dict] = None,
                fit_evals: int = RESCORE_EVALS, refine_evals: int = REFINE_EVALS,
                base_refine_evals: int = BASE_REFINE_EVALS, noise_std: Optional[Mapping[str, float]] = None,
-               test_max: int = TEST_MAX) -> CloseLoopResult:
+               test_max: int = TEST_MAX, polish_evals: Optional[int] = None,
+               profile_points: int = PROFILE_POINTS) -> CloseLoopResult:
     """The loop on one problem: base identification (unless x_base is given),
     then up to `rounds` rounds of analysis, attribution, extension and tests.
     `sensor_offset_std`: the transducer's declared zero tolerance per force
     channel (N); offsets and gains within 3 sigma of it are not faults.
     `noise_std`: its declared white noise per force channel (N; meta.json
-    sensor.force_noise_std_N), else estimated from the residual."""
+    sensor.force_noise_std_N), else estimated from the residual.
+    `polish_evals`: the complex run again from the base point at the start of
+    each round (default `max_evals`, what an extension gets; 0: none);
+    `profile_points`: the profile of the base's least-determined variable
+    (profile_polish; 0: none)."""
     t0 = time.time()
     out = Path(out) if out else None
     if out:
@@ -320,7 +325,8 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
         rnd = one_round(base, x, k, remaining, max_evals=max_evals, seed=seed + k, out=out, progress=progress,
                         workers=workers, sensor_offset_std=sensor_offset_std, fit_evals=fit_evals,
                         refine_evals=refine_evals, base_refine_evals=base_refine_evals, noise_std=noise_std,
-                        test_max=test_max)
+                        test_max=test_max, polish_evals=max_evals if polish_evals is None else polish_evals,
+                        profile_points=profile_points)
         result_rounds.append(rnd)
         if not rnd.confirmed or not [e for e in remaining if e != rnd.effect]:
             break
@@ -359,7 +365,7 @@ def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: 
               sensor_offset_std: Optional[dict] = None, fit_evals: int = RESCORE_EVALS,
               refine_evals: int = REFINE_EVALS, base_refine_evals: int = BASE_REFINE_EVALS,
               noise_std: Optional[Mapping[str, float]] = None, test_max: int = TEST_MAX,
-              polish: bool = True) -> Round:
+              polish_evals: Optional[int] = None, profile_points: int = PROFILE_POINTS) -> Round:
     """One round (module docstring). The base must have had every chance the
     extension had: after each candidate's extended identification the base is
     refitted from the extension's base parameters, and if that lowers the base
@@ -372,8 +378,8 @@ def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: 
                                workers=workers, sensor_offset_std=sensor_offset_std, fit_evals=fit_evals,
                                refine_evals=refine_evals, base_refine_evals=base_refine_evals, noise_std=noise_std,
                                test_max=test_max, last=attempt == BASE_RESTARTS, attempt=attempt,
-                               polish_evals=max_evals if polish else 0,
-                               profile_points=PROFILE_POINTS if polish else 0)
+                               polish_evals=max_evals if polish_evals is None else polish_evals,
+                               profile_points=profile_points)
         rnd.base_restarts = restarts
         if better is None:
             return rnd

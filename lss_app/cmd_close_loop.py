@@ -17,7 +17,8 @@ from pathlib import Path
 
 def register(sub, common) -> None:
     from identification.catalogue import CATALOGUE
-    from identification.close_loop import BASE_REFINE_EVALS, REFINE_EVALS, RESCORE_EVALS, TEST_MAX
+    from identification.close_loop import (BASE_REFINE_EVALS, PROFILE_POINTS, REFINE_EVALS, RESCORE_EVALS,
+                                           TEST_MAX)
     ap = sub.add_parser("close-loop", parents=[common], help="residual -> missing effect -> extended model",
                         description="Close the loop: residual -> missing effect -> extended model.")
     ap.add_argument("measurement", help="measurement folder (samples.csv + meta.json)")
@@ -38,6 +39,9 @@ def register(sub, common) -> None:
                          "identification (0: none)")
     ap.add_argument("--base-refine-evals", type=int, default=BASE_REFINE_EVALS,
                     help="simulations of the base's refinement to its own optimum before any test (0: none)")
+    ap.add_argument("--profile-points", type=int, default=PROFILE_POINTS,
+                    help="values at which the base's least-determined variable is scanned, the others refitted, "
+                         "before any test (0: no profile)")
     ap.add_argument("--candidates", type=int, default=TEST_MAX,
                     help="candidate effects taken through the extended identification and the tests per round")
     ap.add_argument("--noise", choices=("declared", "estimate"), default="declared",
@@ -68,7 +72,8 @@ def run(args) -> int:
                     ("--fit-evals", args.fit_evals), ("--candidates", args.candidates)):
         if v < 1:
             raise ValueError(f"{name} {v}: must be at least 1")
-    for name, v in (("--refine-evals", args.refine_evals), ("--base-refine-evals", args.base_refine_evals)):
+    for name, v in (("--refine-evals", args.refine_evals), ("--base-refine-evals", args.base_refine_evals),
+                    ("--profile-points", args.profile_points)):
         if v < 0:
             raise ValueError(f"{name} {v}: must be at least 0")
     effects = None
@@ -93,6 +98,7 @@ def run(args) -> int:
                      workers=args.workers, sensor_offset_std=sensor.get("force_offset_std_N"),
                      fit_evals=args.fit_evals, refine_evals=args.refine_evals,
                      base_refine_evals=args.base_refine_evals, test_max=args.candidates,
+                     profile_points=args.profile_points, polish_evals=args.max_evals,
                      noise_std=sensor.get("force_noise_std_N") if args.noise == "declared" else None)
     write_json_atomic(out / "result.json", res.to_dict())
     report = write_report(res, out)
