@@ -65,14 +65,18 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     f = f_start = float(np.sum(r ** 2))
     nfev, it, lam = 1, 0, 1e-3
     per_jacobian = len(x) * (2 if central else 1)
+    steps = None   # central: scaled to each variable's sensitivity at the start, kept after
     while nfev + per_jacobian + 1 <= max_evals:
         if central:
-            from .uncertainty import jacobian
-            J, steps, _ = jacobian(problem, x, sim, rel_step)
-            raw = [J[:, :, k] for k in range(len(x)) if steps[k] > 0]
+            from .uncertainty import jacobian, noise_level
+            w = 1.0 / noise_level(problem.samples - sim) ** 2
+            J, used, _ = jacobian(problem, x, sim, rel_step, w, steps)
+            nfev += per_jacobian + (len(x) if steps is None else 0)
+            steps = used
+            raw = [J[:, :, k] for k in range(len(x)) if used[k] > 0]
         else:
             raw = base_jacobian(problem, x, sim, rel_step=rel_step)
-        nfev += per_jacobian
+            nfev += per_jacobian
         if len(raw) != len(x):
             break
         A = np.stack([(demean_columns(g, demean) * sw).ravel() for g in raw], axis=1)

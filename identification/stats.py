@@ -25,7 +25,11 @@ def load_results(campaign: Path) -> pd.DataFrame:
                "f0": r["f0"], "nfev": r["nfev"], "wheel_type": r.get("wheel_type"),
                "coupling_type": r.get("coupling_type"), "layout": r.get("layout")}
         for k in CORS:
-            row[SYMBOL[k]] = r["values"].get(SYMBOL[k], np.nan)
+            sym = SYMBOL[k]
+            row[sym] = r["values"].get(sym, np.nan)
+            iv = (r.get("interval") or {}).get(sym) or {}
+            row[f"{sym}_lower"], row[f"{sym}_upper"] = iv.get("lower", np.nan), iv.get("upper", np.nan)
+            row[f"{sym}_identifiable"] = iv.get("identifiable")
         rows.append(row)
     return pd.DataFrame(rows).sort_values(["model", "number", "measurement"])
 

@@ -34,9 +34,11 @@ log = logging.getLogger(__name__)
 
 Z95 = 1.959964                 # two-sided 95 % quantile of the normal distribution
 IDENTIFIABLE_WIDTH = 0.4       # of the bound range: a wider 95 % interval is "not identifiable"
-REL_STEP = 0.01                # difference step, of the bound range: the response to it stands well
+REL_STEP = 0.02                # difference step, of the bound range: the response to it stands well
                                # above the solver's error at tolerance 1e-6 (docs/identification.md)
-ROUGH = 0.5                    # |forward - backward| / |their mean| at or above which a variable is not smooth
+RESPONSE = 5.0                 # the change a difference step aims at, in noise levels (Jacobian)
+MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound range
+ROUGH = 0.8                    # |forward - backward| / |their mean| at or above which a variable is not smooth
 
 
 @dataclass
@@ -62,6 +64,14 @@ class Interval:
         return f"{symbol(self.name)} = {self.value:.4g} [{self.lower:.4g}, {self.upper:.4g}]"
 
 
+def noise_level(r: np.ndarray) -> np.ndarray:
+    """The white part of a residual per channel: sqrt(mean(diff(r)^2) / 2), which
+    leaves out a smooth model error (a sensor's noise is white, the model's
+    error is slow)."""
+    r = np.asarray(r, float)
+    return np.sqrt(np.maximum(np.mean(np.diff(r, axis=0) ** 2, axis=0) / 2.0, 1e-30))
+
+
 def _effective_samples(r: np.ndarray) -> np.ndarray:
     """n (1 - rho) / (1 + rho) per channel, rho the lag-1 autocorrelation (>= 0)."""
     n = r.shape[0]
@@ -73,47 +83,63 @@ def _effective_samples(r: np.ndarray) -> np.ndarray:
 
 
 def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
-             rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None) -> tuple:
+             rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
+             steps: Optional[np.ndarray] = None) -> tuple:
     """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
     each column): central differences inside the bounds, one-sided at a bound;
     the roughness is |forward - backward| / |their mean| in the metric
-    `weights` per channel (at a bound: of two successive steps inwards); a failed run leaves a zero
-    column and an infinite roughness."""
+    `weights` per channel (at a bound: of two successive steps inwards); a
+    failed run leaves a zero column and an infinite roughness.
+
+    Each step is scaled to its variable's sensitivity unless `steps` are
+    given: a first step of `rel_step` of the bound range is shortened or
+    lengthened until the simulation moves by about RESPONSE in the metric of
+    `weights` (a few noise levels: far above the solver's error, far below the
+    nonlinearity of a variable the record pins to a thousandth of its range,
+    such as the pretension)."""
     lo, hi = np.array(problem.bounds_array, float).T
     wt = np.ones(sim0.shape[1]) if weights is None else np.asarray(weights, float)
     J = np.zeros(sim0.shape + (len(x),))
-    steps = np.zeros(len(x))
+    used = np.zeros(len(x))
     rough = np.zeros(len(x))
 
     def norm(a):
         return float(np.sqrt(np.sum(a ** 2 * wt)))
+
+    def at(k, h):
+        xh = np.array(x, float)
+        xh[k] += h
+        return problem.simulate(xh)
     for k in range(len(x)):
-        h = rel_step * (hi[k] - lo[k])
-        up, down = x[k] + h <= hi[k], x[k] - h >= lo[k]
+        span = hi[k] - lo[k]
         try:
-            xp, xm = np.array(x, float), np.array(x, float)
-            if up and down:
-                xp[k] += h
-                xm[k] -= h
-                fwd = (problem.simulate(xp) - sim0) / h
-                bwd = (sim0 - problem.simulate(xm)) / h
+            h = float(steps[k]) if steps is not None and steps[k] > 0 else rel_step * span
+            sgn = 1.0 if x[k] + h <= hi[k] else -1.0
+            y1 = at(k, sgn * h)
+            if steps is None:
+                for _ in range(3):   # scale the step to the response (linear guess), at most 3 tries
+                    resp = norm(y1 - sim0)
+                    if 0.25 * RESPONSE <= resp <= 4.0 * RESPONSE or resp == 0:
+                        break
+                    h = float(np.clip(h * RESPONSE / resp, MIN_STEP * span, MAX_STEP * span))
+                    sgn = 1.0 if x[k] + h <= hi[k] else -1.0
+                    y1 = at(k, sgn * h)
+            if sgn > 0 and x[k] - h >= lo[k]:
+                fwd, bwd = (y1 - sim0) / h, (sim0 - at(k, -h)) / h
                 J[:, :, k] = 0.5 * (fwd + bwd)
                 m = norm(J[:, :, k])
                 rough[k] = norm(fwd - bwd) / m if m > 0 else np.inf
             else:  # at a bound: two steps inwards, their differences compared
-                sgn = 1.0 if up else -1.0
-                xp[k] += sgn * h
-                xm[k] += 2 * sgn * h
-                y1 = problem.simulate(xp)
-                d1, d2 = sgn * (y1 - sim0) / h, sgn * (problem.simulate(xm) - y1) / h
+                d1 = sgn * (y1 - sim0) / h
+                d2 = sgn * (at(k, 2 * sgn * h) - y1) / h
                 J[:, :, k] = d1
                 m = norm(0.5 * (d1 + d2))
                 rough[k] = norm(d1 - d2) / m if m > 0 else np.inf
-            steps[k] = h
+            used[k] = h
         except Exception as exc:  # the variable then counts as not identifiable
             log.warning("jacobian column %s failed: %s", problem.free[k], exc)
             rough[k] = np.inf
-    return J, steps, rough
+    return J, used, rough
 
 
 def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[np.ndarray] = None,
@@ -131,7 +157,10 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
     w = (n_eff / r.shape[0]) / sigma2                          # per channel
     F = np.einsum("tjk,j,tjl->kl", J, w, J)
     lo, hi = np.array(problem.bounds_array, float).T
-    cov = np.linalg.pinv(F, rcond=1e-12)
+    # the columns differ by orders of magnitude (a pretension in metres, a gain in N s/m): invert the
+    # correlation form, else the weakly determined directions drown in the strong ones' rounding
+    scale = np.sqrt(np.where(np.diag(F) > 0, np.diag(F), 1.0))
+    cov = np.linalg.pinv(F / np.outer(scale, scale), rcond=1e-10) / np.outer(scale, scale)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     sd = np.where((steps > 0) & (np.diag(F) > 0), sd, np.inf)
     out = []

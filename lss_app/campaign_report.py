@@ -61,6 +61,21 @@ def make_figures(df: pd.DataFrame, out: Path) -> list[str]:
     return figs
 
 
+def _cell(row, sym: str) -> str:
+    v, lo, hi, ok = row[sym], row.get(f"{sym}_lower"), row.get(f"{sym}_upper"), row.get(f"{sym}_identifiable")
+    if ok is None or (isinstance(ok, float) and np.isnan(ok)):
+        return f"{v:.3f}"
+    return f"{v:.3f} [{lo:.3f}, {hi:.3f}]" if ok else f"n.i. ({v:.3f})"
+
+
+def _cor_table(g: pd.DataFrame) -> str:
+    syms = ("e_JA", "e_JR", "e_SW", "e_RW")
+    lines = ["| measurement | " + " | ".join(syms) + " | f |", "|---" * (len(syms) + 2) + "|"]
+    for _, row in g.iterrows():
+        lines.append(f"| {row['measurement']} | " + " | ".join(_cell(row, s) for s in syms) + f" | {row['f']:.4g} |")
+    return "\n".join(lines)
+
+
 def write_report(campaign: Path) -> Path:
     campaign = Path(campaign)
     df = load_results(campaign)
@@ -81,9 +96,10 @@ def write_report(campaign: Path) -> Path:
                  if tests["anova_p"] >= 0.05 and tests["kruskal_p"] >= 0.05
                  else "At the 5 % level the models differ."), ""]
     for model, g in df.groupby("model"):
-        lines += [f"## Coefficients of restitution, model {model}", ""]
-        tab = g[["measurement", "e_JA", "e_JR", "e_SW", "e_RW", "f"]].reset_index(drop=True)
-        lines += [tab.to_markdown(index=False, floatfmt=".3f"), ""]
+        lines += [f"## Coefficients of restitution, model {model}", "",
+                  "Each CoR with its 95 % interval (identification.uncertainty); *n.i.*: the record does not "
+                  "pin it down (interval wider than 40 % of the bounds, or the record is chaotic in it).", ""]
+        lines += [_cor_table(g), ""]
     lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]
     lines += [f"![{f}]({f})" for f in figs[1:]] + [""]
     write_atomic(out / "report.md", "\n".join(lines))

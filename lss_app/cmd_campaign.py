@@ -21,6 +21,8 @@ def register(sub, common) -> None:
     ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")
+    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics"),
+                    help="pointwise: Eq. 10-12 (default); statistics: spectra and amplitude distributions")
     ap.add_argument("--presolve", type=int, default=0,
                     help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
     ap.add_argument("--refine-evals", type=int, default=0,
@@ -44,7 +46,7 @@ def run_campaign(args) -> int:
                        scheduler=args.scheduler, max_evals=args.max_evals, seed=args.seed,
                        window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
                        tare=args.tare, restarts=args.restarts, presolve=args.presolve,
-                       refine_evals=args.refine_evals, uncertainty=True)
+                       refine_evals=args.refine_evals, uncertainty=True, objective=args.objective)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

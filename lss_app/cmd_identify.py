@@ -23,6 +23,9 @@ def register(sub, common) -> None:
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")
+    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics"),
+                    help="pointwise: the paper's Eq. 10-12 (default); statistics: spectra and amplitude "
+                         "distributions per channel, for steady running (docs/identification.md)")
     ap.add_argument("--presolve", type=int, default=0,
                     help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
@@ -50,7 +53,8 @@ def run(args) -> int:
         raise ValueError(f"--refine-evals {args.refine_evals}: must be 0 or more")
     model = parse_model(args.model)
     meas = load_measurement(args.measurement)
-    problem = from_measurement(meas, model, free=parse_free(args.free), window=args.window, tare=args.tare)
+    problem = from_measurement(meas, model, free=parse_free(args.free), window=args.window, tare=args.tare,
+                               objective=args.objective)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",

@@ -326,7 +326,7 @@ def test_measurement_with_effects_looks_like_any_other(tmp_path):
     t0 = rig.load_truth(plain / "m20")
     assert t0["effects"] == {} and t0["artefacts"] == {} and t0["effect_seed"] is None
     # staleness: other effects are another measurement
-    fx = (tuple(E.CATALOGUE), 7, ("channel_bump",))
+    fx = (tuple(E.CATALOGUE), 7, ("channel_bump",), "steady")
     for folder, truth in ((hidden, t), (plain, t0)):
         truth["full_lap"] = True
         (folder / "answers" / "m20" / "truth.json").write_text(json.dumps(truth))
@@ -336,9 +336,9 @@ def test_measurement_with_effects_looks_like_any_other(tmp_path):
     assert "other undeclared effects" in rig._existing(hidden, 20, "recovery", rig.DEFAULT_SEED, sha)
     assert "other undeclared effects" in rig._existing(plain, 20, "recovery", rig.DEFAULT_SEED, sha, fx)
     assert "other undeclared effects" in rig._existing(hidden, 20, "recovery", rig.DEFAULT_SEED, sha,
-                                                       (("sensor",), 7, ()))
+                                                       (("sensor",), 7, (), "steady"))
     assert "effect seed 7" in rig._existing(hidden, 20, "recovery", rig.DEFAULT_SEED, sha,
-                                            (tuple(E.CATALOGUE), 8, ("channel_bump",)))
+                                            (tuple(E.CATALOGUE), 8, ("channel_bump",), "steady"))
     with pytest.raises(FileExistsError, match="m20: it was made with other undeclared effects"):
         rig.generate_set("recovery", hidden, [20], workers=1, progress=False, log=lambda *_: None)
     # drawn parameters that changed (another version of the draws) are caught too

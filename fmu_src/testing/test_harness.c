@@ -196,7 +196,7 @@ static double init_and_run(Env *env, fmi2Component c, const Opts *o, int k, doub
 /* Wrong calls in Step Mode at time t: each must give fmi2Error and a message
  * and change nothing. */
 static void wrong_calls(Env *env, fmi2Component c, const Opts *o, double t) {
-    fmi2ValueReference vr_out = VR_CHAIN_V_MEAN, vr_fixed = VR_CONTACT_E_JA, vr_in = VR_DRIVE_V_REF;
+    fmi2ValueReference vr_out = VR_CHAIN_V_MEAN, vr_fixed = VR_CHAIN_PRETENSION, vr_in = VR_DRIVE_V_REF;
     fmi2ValueReference vr_bad[3] = {0, LSS_N_VARS + 1, 0xFFFFFFFFu}, vr_str = VR_LAYOUT_NAME;
     fmi2Real x = 0.5, big = 1e300, nan_ = NAN, r[4];
     fmi2Integer ix;

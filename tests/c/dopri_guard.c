@@ -17,8 +17,10 @@ static void decay(void *ctx, double t, const double *y, double *dy) {  /* y' = -
 }
 
 static void run(const char *name, double k, double h_max, double t0, double h0, double err_prev, double t_end) {
-    double y[1] = {1.0}, scale[1] = {1.0}, rel[1] = {0.0}, w[9][1];
-    Dopri d = {1, decay, NULL, &k, scale, rel, 1e-6, h_max, {w[0], w[1], w[2], w[3], w[4], w[5], w[6]}, w[7], w[8]};
+    double y[1] = {1.0}, scale[1] = {1.0}, rel[1] = {0.0}, w[DOPRI_NK + 2][1];
+    Dopri d = {.n = 1, .method = DOPRI_DOPRI5, .rhs = decay, .accepted = NULL, .ctx = &k, .scale = scale,
+               .rel = rel, .tol = 1e-6, .h_max = h_max, .ytmp = w[DOPRI_NK], .ynew = w[DOPRI_NK + 1]};
+    for (int i = 0; i < 7; i++) d.k[i] = w[i];  /* DOPRI5 uses the first seven stages */
     DopriState s;
     dopri_reset(&s, t0, h0);
     s.err_prev = err_prev;

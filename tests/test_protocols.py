@@ -1,0 +1,98 @@
+"""Measurement protocols (issue 17): declared in meta.json, checked with a
+message naming the field and the value, followed by the virtual transducer
+cart and by the identification problem alike."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from identification.problem import from_measurement
+from lss_fmu import measurement as M
+from lss_fmu.design import DESIGN, SYMBOL
+from lss_fmu.protocol import Protocol, from_meta
+from lss_fmu.rig import load_truth, run_measurement
+from test_measurement import make_meta, make_samples
+
+
+# --- the schedules ----------------------------------------------------------------------
+def test_schedules():
+    up = Protocol("start-up", ramp_time=1.0).schedule(2.0, 2.0)
+    assert [up(t) for t in (0.0, 0.5, 1.0, 3.0)] == [0.0, 1.0, 2.0, 2.0]
+    step = Protocol("start-up").schedule(2.0, 2.0)
+    assert step(0.0) == 2.0                       # ramp 0: a step at the start command
+    ss = Protocol("speed-step", step_time=1.0, v_from=1.5, ramp_time=0.0)
+    f = ss.schedule(2.2, 2.0)                     # the set point reached 10 % high: v_from too
+    assert f(0.5) == pytest.approx(1.65) and f(1.0) == 2.2 and ss.v_before(2.2, 2.0) == pytest.approx(1.65)
+    stop = Protocol("stop", step_time=0.5, ramp_time=1.0).schedule(2.0, 2.0)
+    assert [stop(t) for t in (0.0, 0.5, 1.0, 1.5, 9.0)] == [2.0, 2.0, 1.0, 0.0, 0.0]
+    assert Protocol().schedule(2.5, 2.0)(7.0) == 2.5 and not Protocol().transient
+
+
+# --- bad input --------------------------------------------------------------------------
+BAD = [
+    ({"name": "warp"}, "protocol.name", "warp"),
+    ({"name": "start-up", "ramp_time": -1}, "protocol.ramp_time", "-1"),
+    ({"name": "start-up", "ramp_time": 99.0}, "protocol.ramp_time", "longer than the record"),
+    ({"name": "stop"}, "protocol.step_time", "needs"),
+    ({"name": "stop", "step_time": 50.0}, "protocol.step_time", "outside the record"),
+    ({"name": "speed-step", "step_time": 0.5, "v_from": 30.0}, "protocol.v_from", "30"),
+    ({"name": "speed-step", "step_time": 0.5}, "protocol.v_from", "None"),
+    ({"name": "steady", "step_time": 1.0}, "protocol.step_time", "no step"),
+    ({"name": "start-up", "tempo": 1}, "protocol.tempo", "unknown"),
+    (["start-up"], "protocol", "object"),
+]
+
+
+@pytest.mark.parametrize("block, field, fragment", BAD, ids=[b[1] + ":" + b[2] for b in BAD])
+def test_a_protocol_the_fmu_cannot_follow_is_refused(tmp_path, block, field, fragment):
+    meta = make_meta()
+    M.write_measurement(tmp_path / "m", make_samples(), meta)
+    path = tmp_path / "m" / M.META_FILE
+    spoilt = json.loads(path.read_text())
+    spoilt["protocol"] = block
+    path.write_text(json.dumps(spoilt))
+    with pytest.raises(M.MeasurementError) as info:
+        M.load_measurement(tmp_path / "m")
+    msg = str(info.value)
+    assert "meta.json" in msg and field in msg and fragment in msg, msg
+
+
+def test_a_record_without_a_protocol_is_steady_running():
+    assert from_meta({}) == Protocol() and from_meta({"protocol": "stop"}).name == "stop"
+
+
+# --- followed by the rig and the problem ---------------------------------------------------
+@pytest.fixture(scope="module")
+def start_up(tmp_path_factory, fmu_file):
+    from lss_fmu.runner import ChainSimulator
+    out = tmp_path_factory.mktemp("protocols")
+    with ChainSimulator() as sim:
+        run_measurement("recovery", 20, out, sim, protocol="start-up", lap_seconds=1.5)
+    return M.load_measurement(out / "m20")
+
+
+def test_the_rig_writes_what_the_engineer_did(start_up):
+    meta = start_up.meta
+    assert meta["protocol"] == {"name": "start-up", "ramp_time": 0.0}
+    assert start_up.protocol.from_rest and "Start-up from standstill" in meta["notes"]
+    F = start_up.forces.to_numpy()
+    v = start_up.speeds.to_numpy()
+    assert np.all(np.abs(v[0]) < 1e-9)            # the wheels stand still at the start command
+    assert F[:, 0].max() - F[:, 0].min() > 200.0  # and the joint force swings as the drive pushes
+
+
+def test_the_problem_follows_the_record(start_up):
+    p = from_measurement(start_up, "LW", tare=True)
+    assert p.protocol.from_rest and p.tolerance == 1e-6
+    t = load_truth(start_up)
+    vals = {**{f"contact.{k}": v for k, v in t["cor"].items()},
+            **{n: t["design_variables"][SYMBOL[n]] for n in DESIGN[4:]}}
+    xt = np.array([vals[n] for n in p.free])
+    f_truth, f_start = p(xt), p(p.x0_vector())
+    # at the truth only the sensor is left (noise, offsets beyond the tare): the
+    # start point's CoRs and drive leave several times more
+    assert f_truth < 0.2 * f_start, (f_truth, f_start)
+    H = p.channel_errors(xt)
+    assert H[0] < 0.03, H      # the joint's axial force, the largest span, at the sensor's noise
