@@ -42,8 +42,8 @@ from lss_fmu.variables import FORCE_CHANNELS
 
 from .attribution import Attribution, attribute, demean_columns, simulate_with
 from .catalogue import CATALOGUE, Context, SensorError
-from .evidence import (ALPHA, Departure, HoldOut, LRTest, Noise, departures, excess, fit_gain, holdout, lr_test,
-                       named_bands, noise_levels, project_out)
+from .evidence import (ALPHA, Departure, HoldOut, LRTest, Noise, beyond, departures, excess, fit_gain, holdout,
+                       lr_test, named_bands, noise_levels, project_out)
 from .extension import extended_problem, extension_of
 from .identify import identify
 from .problem import IdentificationProblem, nrmsd, tared
@@ -710,7 +710,7 @@ def _stats(t: CandidateTest) -> str:
 def _decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.ndarray) -> None:
     """The verdict from the tests (module docstring)."""
     sup = next((t for t in rnd.tests if t.supported), None)
-    deps = [d for d in rnd.departures if d.test.significant and d.test.dbic > 0]
+    deps = [d for d in rnd.departures if d.counts]
     best_dep = max(deps, key=lambda d: d.test.dbic) if deps else None
     ev = rnd.evidence
     if ev is not None:   # the extension shown in the report: the confirmed one, else the first tested
@@ -722,6 +722,10 @@ def _decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.n
         sup.why_not.append(f"a disturbance outside the catalogue explains the residual better "
                            f"({best_dep.label}: dBIC {best_dep.test.dbic:+.1f} > {sup.lr.dbic:+.1f})")
         sup = None
+    if sup is not None:
+        _still_outside(rnd, sup, w)
+        if not sup.supported:
+            sup = None
     noise = f"noise {rnd.noise.source}" if rnd.noise else "noise"
     if sup is not None:
         eff = CATALOGUE[sup.effect]
@@ -750,6 +754,32 @@ def _decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.n
         rnd.outcome = "nothing significant"
         ratio = "" if rnd.excess is None else f" (mean square / noise at most {float(np.max(rnd.excess.ratio)):.2f})"
         rnd.verdict = f"nothing significant: the residual is at the noise level{ratio}; {best}"
+
+
+def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
+    """Each significant disturbance outside the catalogue tested again on the
+    supported candidate's extended residual (evidence.beyond): if one still
+    explains a significant part (its own Bonferroni p < ALPHA and dBIC > 0),
+    the candidate only took a share of something the catalogue does not
+    contain, and is not confirmed."""
+    deps = [d for d in rnd.departures if d.counts]
+    if not deps:
+        return
+    try:
+        r_e, _ = _S(sup.problem, sup.problem.simulate(sup.x), w)
+    except Exception as exc:
+        log.warning("%s: extended residual unavailable for the departures: %s", sup.effect, exc)
+        return
+    J = rnd.attribution.base_columns if rnd.attribution is not None else ()
+    for d in deps:
+        t = beyond(d, r_e, w, J, looks=len(deps))
+        d.detail["beyond_candidate"] = None if t is None else {"effect": sup.effect, "T": float(t.T),
+                                                               "p_bonferroni": float(t.p_adj), "dbic": float(t.dbic)}
+        if t is not None and t.significant and t.dbic > 0:
+            sup.supported = False
+            sup.why_not.append(f"a disturbance outside the catalogue remains beyond it ({d.label}: Bonferroni p = "
+                               f"{t.p_adj:.2g}, dBIC {t.dbic:+.1f} on the extended residual)")
+            return
 
 
 def _budget(evals: int, problem: IdentificationProblem, effect: str) -> int:

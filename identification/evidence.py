@@ -427,9 +427,30 @@ class Departure:
     label: str
     test: LRTest
     detail: dict = field(default_factory=dict)
+    columns: list = field(default=None, repr=False, compare=False)   # its signature, off the base columns
+
+    @property
+    def counts(self) -> bool:
+        """Significant, preferred by BIC, and not at the bound of its search (a
+        fit on the bound is no estimate: the clock at CLOCK_MAX stands in for
+        something else, e.g. a missing mass slowing the whole transient)."""
+        return self.test.significant and self.test.dbic > 0 and not self.detail.get("at_bound", False)
 
     def to_dict(self) -> dict:
         return {"family": self.family, "label": self.label, "test": self.test.to_dict(), "detail": self.detail}
+
+
+def beyond(dep: Departure, r_ext: np.ndarray, w: np.ndarray, J: Sequence[np.ndarray] = (),
+           looks: int = 1) -> Optional[LRTest]:
+    """The departure tested again on a candidate's extended residual r_ext
+    (tared): what it still explains once the catalogue effect has taken its
+    share, with its own hypotheses times the `looks` taken (the departures
+    re-tested; Bonferroni). None without its columns."""
+    if not dep.columns:
+        return None
+    _, fit, S0, S1 = fit_gain(r_ext, dep.columns, w)
+    return lr_test(S0, S1, dep.columns, r_ext - fit, w, dep.test.q, dep.test.m * max(1, looks), dep.test.m_effect,
+                   J=J)
 
 
 def _periodogram_peak(x: np.ndarray, fs: float, excluded: Sequence[tuple], f_min: float) -> tuple:
@@ -493,7 +514,7 @@ def departures(problem, x, sim: np.ndarray, r: np.ndarray, J: Sequence[np.ndarra
         c, *_ = fit_gain(r, gt, w)
         test = lr_test(S_b, S_b - dS, gt, r - fit, w, 1, k * (k - 1), k * (k - 1), J=J)
         out.append(Departure("crosstalk", f"{SHORT[FORCE_CHANNELS[kk]]} into {SHORT[FORCE_CHANNELS[j]]}", test,
-                             {"into": FORCE_CHANNELS[j], "from": FORCE_CHANNELS[kk], "factor": float(c[0])}))
+                             {"into": FORCE_CHANNELS[j], "from": FORCE_CHANNELS[kk], "factor": float(c[0])}, gt))
     # periodic interference
     fs = 1.0 / float(np.median(np.diff(t))) if n > 1 else 1.0
     f_min = 3.0 / max(t[-1] - t[0], 1e-9)
@@ -516,7 +537,7 @@ def departures(problem, x, sim: np.ndarray, r: np.ndarray, J: Sequence[np.ndarra
         m = k * max(1, n // 2)
         test = lr_test(S_b, S_b - dS, gt, r - fit, w, 3, m, m, J=J)
         out.append(Departure("interference", f"{f0:.1f} Hz on {SHORT[FORCE_CHANNELS[j]]}", test,
-                             {"channel": FORCE_CHANNELS[j], "frequency_hz": f0, "amplitude_N": amp}))
+                             {"channel": FORCE_CHANNELS[j], "frequency_hz": f0, "amplitude_N": amp}, gt))
     # a transient on one channel (a loose cable, a knock): a raised-cosine pulse, the matched
     # filter's largest response over the channels, centres and PULSE_WIDTHS
     best = None
@@ -541,7 +562,7 @@ def departures(problem, x, sim: np.ndarray, r: np.ndarray, J: Sequence[np.ndarra
         test = lr_test(S_b, S1, gt, r - fit, w, 3, m, m, J=J)
         out.append(Departure("pulse", f"{width:g} s pulse on {SHORT[FORCE_CHANNELS[j]]} at t = {t[i + L // 2]:.2f} s",
                              test, {"channel": FORCE_CHANNELS[j], "t": float(t[i + L // 2]), "width_s": width,
-                                    "amplitude_N": float(c[0]) if len(c) else 0.0}))
+                                    "amplitude_N": float(c[0]) if len(c) else 0.0}, gt))
     # the logger's clock
     if clock and n > 8:
         from scipy.optimize import minimize_scalar
@@ -581,7 +602,8 @@ def departures(problem, x, sim: np.ndarray, r: np.ndarray, J: Sequence[np.ndarra
             if t_lin.T > test.T:
                 test = t_lin
             out.append(Departure("clock", f"clock {'fast' if eps > 0 else 'slow'} by {abs(eps) * 1e3:.2f} per mille",
-                                 test, {"eps": eps, "simulations": len(cache) + 2}))
+                                 test, {"eps": eps, "simulations": len(cache) + 2,
+                                        "at_bound": bool(abs(eps) >= 0.98 * CLOCK_MAX)}, g0t))
         except Exception as exc:
             log.warning("clock departure failed: %s", exc)
     return out
