@@ -84,6 +84,7 @@ class CandidateTest:
     supported: bool = False
     why_not: list = field(default_factory=list)
     base_alt: Optional[tuple] = field(default=None, repr=False)   # (x, S) of the base refitted from here
+    signature: list = field(default=None, repr=False)   # the hypothesis' columns at the base, every probe
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "hypothesis": self.label, "f": self.f, "S": self.S,
@@ -509,12 +510,14 @@ def _catalogue_bands(problem: IdentificationProblem, sig: dict, effects: Sequenc
         return []
 
 
-def _signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0: np.ndarray) -> list:
+def _signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0: np.ndarray,
+                       every: bool = False) -> list:
     """The effect's signature at the base (the attribution's probes; for the
-    sensor those of the channels the extension frees), tared channels demeaned."""
+    sensor those of the channels the extension frees, unless `every`), tared
+    channels demeaned."""
     from .attribution import _signatures
     probes = sc.hypothesis.probes
-    if isinstance(CATALOGUE[sc.effect], SensorError):
+    if isinstance(CATALOGUE[sc.effect], SensorError) and not every:
         names = set(ext.free)
         probes = [p for p in probes if f"effects.sensor.{p.label.replace(' ', '.')}" in names]
     hyp = dataclasses.replace(sc.hypothesis, probes=probes)
@@ -554,7 +557,8 @@ def _test_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, seed
     # (a) the linear signature beyond the base columns
     sim_b = base.simulate(x_b)
     r_b, _ = _S(base, sim_b, w)
-    G = project_out(_signature_columns(base, x_b, sc, ext, sim_b), att.base_columns, w)
+    G_raw = _signature_columns(base, x_b, sc, ext, sim_b)
+    G = project_out(G_raw, att.base_columns, w)
     _, fit_lin, S0, S1 = fit_gain(r_b, G, w)
     kw = dict(q=len(ext.free), m=2 * m, m_effect=m_effect, J=att.base_columns)
     lr_lin = lr_test(S_b, S_b - (S0 - S1), G, r_b - fit_lin, w, **kw)
@@ -607,8 +611,10 @@ def _test_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, seed
     identified = {n: float(vals[n]) for n in ext.free}
     identified.update({n: v for n, v in ext.fixed.items()})
     amp = CATALOGUE[sc.effect].amplitude(vals, base.samples.mean(axis=0))
+    every = _signature_columns(base, x_b, sc, ext, sim_b, every=True) \
+        if isinstance(CATALOGUE[sc.effect], SensorError) else G_raw
     return CandidateTest(sc.effect, sc.label, stage2, x_e, float(np.sum(H_e ** 2)), H_e, S_e, lr, ho, identified,
-                         amp, refined, supported=not why, why_not=why, base_alt=base_alt)
+                         amp, refined, supported=not why, why_not=why, base_alt=base_alt, signature=every)
 
 
 def profile_polish(base: IdentificationProblem, x: np.ndarray, w: np.ndarray, *, points: int = PROFILE_POINTS,
@@ -758,7 +764,8 @@ def _decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.n
 
 def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
     """Each significant disturbance outside the catalogue tested again on the
-    supported candidate's extended residual (evidence.beyond): if one still
+    supported candidate's extended residual, beyond the base's columns and
+    every probe of the candidate's hypothesis (evidence.beyond): if one still
     explains a significant part (its own Bonferroni p < ALPHA and dBIC > 0),
     the candidate only took a share of something the catalogue does not
     contain, and is not confirmed."""
@@ -770,7 +777,9 @@ def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
     except Exception as exc:
         log.warning("%s: extended residual unavailable for the departures: %s", sup.effect, exc)
         return
-    J = rnd.attribution.base_columns if rnd.attribution is not None else ()
+    # beyond the base and all the effect can do (every probe of its hypothesis: a sensor extension
+    # that freed too few channels leaves a gain error that crosstalk from a correlated channel mimics)
+    J = list(rnd.attribution.base_columns if rnd.attribution is not None else ()) + list(sup.signature or ())
     for d in deps:
         t = beyond(d, r_e, w, J, looks=len(deps))
         d.detail["beyond_candidate"] = None if t is None else {"effect": sup.effect, "T": float(t.T),

@@ -443,13 +443,14 @@ class Departure:
 def beyond(dep: Departure, r_ext: np.ndarray, w: np.ndarray, J: Sequence[np.ndarray] = (),
            looks: int = 1) -> Optional[LRTest]:
     """The departure tested again on a candidate's extended residual r_ext
-    (tared): what it still explains once the catalogue effect has taken its
-    share, with its own hypotheses times the `looks` taken (the departures
+    (tared), its columns off the columns J (the base's and the effect's): what
+    it still explains once the catalogue effect has taken its share, with its own hypotheses times the `looks` taken (the departures
     re-tested; Bonferroni). None without its columns."""
     if not dep.columns:
         return None
-    _, fit, S0, S1 = fit_gain(r_ext, dep.columns, w)
-    return lr_test(S0, S1, dep.columns, r_ext - fit, w, dep.test.q, dep.test.m * max(1, looks), dep.test.m_effect,
+    cols = project_out(dep.columns, J, w)
+    _, fit, S0, S1 = fit_gain(r_ext, cols, w)
+    return lr_test(S0, S1, cols, r_ext - fit, w, dep.test.q, dep.test.m * max(1, looks), dep.test.m_effect,
                    J=J)
 
 
