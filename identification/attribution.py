@@ -68,11 +68,12 @@ class HypothesisScore:
     probe_gain: np.ndarray  # per probe: share lost if it were dropped (sensor selection)
     hypothesis: Hypothesis = field(repr=False)
     share_fit: Optional[float] = None   # share of f removed when fitted through the FMU (close_loop.rescore)
+    notes: list = field(default_factory=list)   # probes dropped as not identifiable, and why
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "hypothesis": self.label, "share": self.share, "share_fit": self.share_fit,
                 "share_alone": self.share_alone, "coef": [float(c) for c in self.coef],
-                "probes": [p.label for p in self.hypothesis.probes]}
+                "probes": [p.label for p in self.hypothesis.probes], "notes": list(self.notes)}
 
 
 @dataclass
@@ -188,10 +189,18 @@ def _score(effect: Effect, hyp: Hypothesis, G: list, r, J: list, w, f_base: floa
         # fitted to the tared residual, so the channel's zero error is the fitted
         # offset plus what the tare took: that sum, not the fitted part alone, is
         # what the specification bounds (else the tolerance counts twice)
+        # A probe the record cannot identify (the gain of a channel that barely moves) is
+        # dropped first: with it the fit is degenerate (issue 18: a gain of 180 against an
+        # offset of -24 kN)
+        ident, notes = effect.identifiable(G, ctx, r.shape[0])
+        if not ident.all():
+            G = [g if o else np.zeros_like(g) for g, o in zip(G, ident)]
+            c_all, f_JG = _lsq(r, J + G, w)
+            coef = np.where(ident, c_all[len(J):], 0.0)
         zero = np.zeros(len(coef))
         if taken is not None:
             zero[1::2] = taken
-        out = np.abs(coef + zero) > effect.tolerance(ctx)
+        out = (np.abs(coef + zero) > effect.tolerance(ctx)) & ident
         G = [g if o else np.zeros_like(g) for g, o in zip(G, out)]
         c_all, f_JG = _lsq(r, J + G, w)
         coef = np.where(out, c_all[len(J):], 0.0)
@@ -204,4 +213,5 @@ def _score(effect: Effect, hyp: Hypothesis, G: list, r, J: list, w, f_base: floa
         for i in range(len(G)):
             _, f_wo = _lsq(r, J + G[:i] + G[i + 1:], w)
             gains[i] = (f_wo - f_JG) / f_base
-    return HypothesisScore(effect.name, hyp.label, float(share), float(alone), np.asarray(coef), gains, hyp)
+    return HypothesisScore(effect.name, hyp.label, float(share), float(alone), np.asarray(coef), gains, hyp,
+                           notes=notes if isinstance(effect, SensorError) else [])

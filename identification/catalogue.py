@@ -26,6 +26,11 @@ def _offset_std() -> np.ndarray:
     return np.array([OFFSET_STD[c] for c in FORCE_CHANNELS], float)
 
 
+def _noise_std() -> np.ndarray:
+    from lss_fmu.sensor import NOISE_STD
+    return np.array([NOISE_STD[c] for c in FORCE_CHANNELS], float)
+
+
 @dataclass
 class Probe:
     """One signature column: sim(base + params) - sim(base), per unit `scale`;
@@ -57,6 +62,8 @@ class Context:
     # (relative) it may have without being faulty; 3 sigma of its datasheet
     sensor_offset_tol: np.ndarray = field(default_factory=lambda: 3.0 * _offset_std())
     sensor_gain_tol: float = 0.03
+    # the white noise of each force channel, N (declared or estimated: identification.evidence)
+    sensor_noise: np.ndarray = field(default_factory=_noise_std)
 
 
 @dataclass
@@ -246,6 +253,26 @@ class SensorError(Effect):
         """Per probe (gain, offset per channel): what the transducer may show within its specification."""
         return np.ravel([(ctx.sensor_gain_tol, o) for o in ctx.sensor_offset_tol])
 
+    @staticmethod
+    def identifiable(G: list, ctx: Context, n: int) -> tuple:
+        """Per probe, whether the record can tell it from the others, and why not.
+        A gain needs its channel to move: with the channel's standard deviation
+        s_j over n samples, a gain is estimated to sigma_j / (s_j sqrt(n)), and a
+        channel that barely moves makes gain and offset the same column (the fit
+        then trades a gain of hundreds against an offset of kilonewtons). The gain
+        is kept only if that standard error is below the tolerance (a gain the
+        specification allows could otherwise not be told from none)."""
+        ok = np.ones(len(G), bool)
+        why = []
+        for j, ch in enumerate(SENSOR_CH):
+            col = np.asarray(G[2 * j])[:, j]
+            sd = float(np.std(col))
+            need = float(ctx.sensor_noise[j]) / (ctx.sensor_gain_tol * math.sqrt(max(n, 1)))
+            if not sd >= need:
+                ok[2 * j] = False
+                why.append(f"gain {ch}: not identifiable, the channel barely moves (sd {sd:.3g} N < {need:.3g} N)")
+        return ok, why
+
     def select(self, coef: np.ndarray, gains: np.ndarray) -> list:
         """The probes worth identifying: those whose removal would lose more
         than 5 % of the effect's explained share (gains: share per probe)."""
@@ -265,10 +292,10 @@ class SensorError(Effect):
             if i % 2 == 0:
                 name, v = f"effects.sensor.gain.{ch}", float(np.clip(coef[i], -0.45, 0.45))
                 free[name] = (max(-0.49, v - 0.15), min(0.49, v + 0.15))
-            else:
-                name, v = f"effects.sensor.offset.{ch}", float(coef[i])
+            else:   # within the FMU's range (+-1e4 N), with room on both sides
+                name, v = f"effects.sensor.offset.{ch}", float(np.clip(coef[i], -9000.0, 9000.0))
                 w = max(50.0, 0.5 * abs(v))
-                free[name] = (v - w, v + w)
+                free[name] = (max(-1e4, v - w), min(1e4, v + w))
             x0[name] = v
         return Extension(free, x0, {})
 

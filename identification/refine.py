@@ -43,18 +43,20 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
 
 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
-           f_rtol: float = 1e-3, central: bool = False) -> Refined:
+           f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None) -> Refined:
     """Levenberg-Marquardt from x within the problem's bounds, at most
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
     with the best point so far. `central`: the Jacobian by central
     differences (2 simulations per variable instead of 1: accurate to the
     bottom of a smooth bowl, where one-sided differences stall at about half
-    their step)."""
+    their step). `channel_weights`: per channel, the metric minimised instead
+    of the objective's 1 / (n span_j^2) (identification.evidence: 1 / sigma_j^2,
+    the likelihood's); f is then that weighted sum of squares."""
     from .attribution import base_jacobian, demean_columns, weights
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
-    sw = np.sqrt(weights(problem))
+    sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
     try:
         sim, r, demean = _residual(problem, x, sw)
     except Exception as exc:

@@ -61,18 +61,40 @@ def release_problem(window: float = 0.6, s_m: float = 0.3, noise_seed: int = 1,
     return p
 
 
+def cart_trigger(cart: int, sim=None, after: float = 0.05) -> float:
+    """The trigger point s_M just ahead of cart `cart`'s assembled position
+    (`after` m), so that it passes s_M right after the release."""
+    sim = sim or LazySimulator()()
+    sim.start({"layout.name": LAYOUT, "chain.transducer": int(cart), **FIXED})
+    return float(sim.get("transducer.s")) + after
+
+
 def make_problem(effect_params: dict, seed: int, *, transducer: int = 0, s_m: float = 0.05,
-                 artefact: dict | None = None, offsets: bool = True, sim: LazySimulator | None = None) -> tuple:
+                 artefact: dict | None = None, offsets: bool = True, sim: LazySimulator | None = None,
+                 artefacts: dict | None = None, window: float = WINDOW) -> tuple:
     """(problem, truth_x): the measurement simulated with `effect_params`, the
-    problem without them."""
-    times = np.arange(0.0, WINDOW, 1.0 / 300.0)
+    problem without them. `artefacts`: disturbances outside the catalogue as
+    lss_fmu.rig_effects draws them ({name: definition}: interference,
+    crosstalk, clock_drift), added to the clean forces (the clock: the forces
+    simulated at the true times t / (1 + eps))."""
+    times = np.arange(0.0, window, 1.0 / 300.0)
     x0 = {**TRUTH, "trigger.s_M": s_m, **{k: 0.55 for k in CORS}}
     fixed = {**FIXED, "chain.transducer": transducer}
     p = IdentificationProblem(np.zeros((len(times), 7)), times, LAYOUT, "LW", {k: (0.2, 0.9) for k in CORS},
                               fixed=fixed, free=CORS, x0=x0, settle=SETTLE, name=f"case{seed}", tare=tare_of(),
                               sim=sim or LazySimulator())
     truth = np.array([TRUTH[k] for k in CORS])
-    clean = simulate_with(p, truth, effect_params)
+    artefacts = dict(artefacts or {})
+    if "clock_drift" in artefacts:
+        import dataclasses
+        clean = simulate_with(dataclasses.replace(p, times=times / (1.0 + float(artefacts["clock_drift"]["eps"]))),
+                              truth, effect_params)
+    else:
+        clean = simulate_with(p, truth, effect_params)
+    for name in ("interference", "crosstalk"):
+        if name in artefacts:
+            from lss_fmu.rig_effects import add_to_forces
+            clean, _ = add_to_forces(times, clean, name, artefacts[name])
     rng = np.random.default_rng([seed, 99])
     noisy = clean + rng.normal(size=clean.shape) * [NOISE_STD[c] for c in FORCE_CHANNELS]
     if offsets:  # the transducer's own zero error, within its specification
@@ -86,15 +108,25 @@ def make_problem(effect_params: dict, seed: int, *, transducer: int = 0, s_m: fl
     return p, truth
 
 
-def effect_case(effects, seed: int, artefact: dict | None = None) -> tuple:
-    """(problem, drawn FMU parameters): the effects drawn by the virtual
-    transducer cart (lss_fmu.rig_effects) from `seed`, switched on in the
-    measurement only."""
+def effect_case(effects, seed: int, artefact: dict | None = None, *, params: dict | None = None,
+                artefacts=None, transducer: int | None = None, lead: float = 0.5) -> tuple:
+    """(problem, FMU parameters of the effects): the effects drawn by the virtual
+    transducer cart (lss_fmu.rig_effects) from `seed` (or given as `params`),
+    switched on in the measurement only. `artefacts`: names of disturbances
+    outside the catalogue drawn by the rig from the seed (or {name:
+    definition}). `transducer`: the transducer cart (default 0, or the one
+    `lead` m before a bump), triggered just after the release."""
     from lss_fmu import rig_effects
-    params = rig_effects.draw_effects(list(effects), seed, LAYOUT) if effects else {}
+    if params is None:
+        params = rig_effects.draw_effects(list(effects), seed, LAYOUT) if effects else {}
+    if artefacts and not isinstance(artefacts, dict):
+        from lss_fmu.layouts import load_track
+        artefacts = rig_effects.draw_artefacts(list(artefacts), seed, float(load_track(LAYOUT).length))
     sim = LazySimulator()
     kw = {}
-    if "effects.track_bump.s" in params:  # the transducer cart passes the drawn joint in the window
-        kw["transducer"], kw["s_m"] = transducer_before(params["effects.track_bump.s"], sim=sim())
-    problem, _ = make_problem(params, seed, artefact=artefact, sim=sim, **kw)
+    if "effects.track_bump.s" in params and transducer is None:  # the transducer cart passes the joint in the window
+        kw["transducer"], kw["s_m"] = transducer_before(params["effects.track_bump.s"], lead=lead, sim=sim())
+    elif transducer is not None:
+        kw["transducer"], kw["s_m"] = int(transducer), cart_trigger(int(transducer), sim=sim())
+    problem, _ = make_problem(params, seed, artefact=artefact, sim=sim, artefacts=artefacts, **kw)
     return problem, params

@@ -1,9 +1,13 @@
 """The close-loop report: Markdown with figures, next to result.json.
 
-Per round: the verdict, the attribution ranking (share of f each effect
-explains beyond the base parameters), the residual analysis figures, and for
-an extension the identified effect values, f and NRMSD per channel before and
-after, with overlays of measured, old model and extended model.
+Per round: the verdict and the evidence behind it (identification.evidence:
+the noise per channel, the likelihood-ratio test with its statistic and
+p-values, BIC, the held-out gain, the disturbances outside the catalogue,
+the candidates dropped and why), the attribution ranking (share of f each
+effect explains beyond the base parameters: it orders the candidates, it
+does not decide), the residual analysis figures, and for an extension the
+identified effect values, f and NRMSD per channel before and after, with
+overlays of measured, old model and extended model.
 """
 from __future__ import annotations
 
@@ -16,13 +20,14 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from identification.catalogue import CATALOGUE  # noqa: E402
-from identification.close_loop import CONFIRM, SHARE_MIN  # noqa: E402
+from identification.evidence import ALPHA, EXCESS_MIN  # noqa: E402
+from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
 from lss_fmu.design import LABELS  # noqa: E402
 
 from .figures.identification import forces_overlay, nrmsd_bars  # noqa: E402
 
 
-def ranking_figure(rnd, path: Path, threshold: float) -> Path:
+def ranking_figure(rnd, path: Path, threshold: float = None) -> Path:
     rk = rnd.attribution.ranking
     fig, ax = plt.subplots(figsize=(8, 0.45 * max(len(rk), 3) + 1.2))
     names = [f"{r.effect} ({r.label})" for r in rk][::-1]
@@ -32,9 +37,9 @@ def ranking_figure(rnd, path: Path, threshold: float) -> Path:
     ax.barh(y - 0.2, [100 * (r.share_fit or 0.0) for r in rk][::-1], 0.4, color="tab:orange",
             label="fitted through the FMU (top candidates)")
     ax.set_yticks(y, names, fontsize=8)
-    ax.axvline(100 * threshold, color="tab:red", ls="--", lw=1,
-               label=f"candidate threshold {100 * threshold:.0f}% (either estimate)")
-    ax.set_xlabel("share of the objective f explained, %")
+    if threshold is not None:
+        ax.axvline(100 * threshold, color="tab:red", ls="--", lw=1, label=f"{100 * threshold:.0f}%")
+    ax.set_xlabel("share of the objective f explained, % (orders the candidates; the tests decide)")
     ax.set_title(f"Round {rnd.number}: attribution of the residual (f = {rnd.f_base:.4g})")
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3, axis="x")
@@ -55,20 +60,20 @@ def write_report(res, out: Path) -> Path:
     if res.found:
         lines += [f"Effects found, in turn: {', '.join(res.found)}.", ""]
     for rnd in res.rounds:
-        lines += [f"## Round {rnd.number}", "", rnd.verdict + ".", ""]
-        fig = ranking_figure(rnd, out / f"round{rnd.number}_attribution", SHARE_MIN)
-        lines += ["| effect | best hypothesis | share of f, linear (beyond base) | linear, alone | "
+        lines += [f"## Round {rnd.number}: {getattr(rnd, 'outcome', '') or 'verdict'}", "", rnd.verdict + ".", ""]
+        lines += evidence_section(rnd)
+        fig = ranking_figure(rnd, out / f"round{rnd.number}_attribution")
+        lines += ["### Attribution (orders the candidates)", "",
+                  "| effect | best hypothesis | share of f, linear (beyond base) | linear, alone | "
                   "fitted through the FMU |", "|---|---|---|---|---|"]
         for r in rnd.attribution.ranking:
             fit = "-" if r.share_fit is None else f"{100 * r.share_fit:.1f}%"
             lines.append(f"| {r.effect}: {CATALOGUE[r.effect].title} | {r.label} | {100 * r.share:.1f}% | "
                          f"{100 * r.share_alone:.1f}% | {fit} |")
         lines += ["", f"The base parameters alone, refitted linearly, would bring f from "
-                      f"{rnd.attribution.f_base:.4g} to {rnd.attribution.f_base_refit:.4g}. An effect is "
-                      f"a candidate when it explains at least {100 * SHARE_MIN:.0f}% of f, linearly beyond the base "
-                      f"parameters or fitted through the FMU with the base held, and significant when the "
-                      f"extended identification lowers f by at least {100 * CONFIRM:.0f}%.", "",
-                  f"![attribution]({fig.name})", ""]
+                      f"{rnd.attribution.f_base:.4g} to {rnd.attribution.f_base_refit:.4g}. The shares order "
+                      f"the candidates that are taken through the extended identification; the tests above "
+                      f"decide.", "", f"![attribution]({fig.name})", ""]
         if rnd.attribution.failed:
             lines += [f"Probe runs that failed: {len(rnd.attribution.failed)} (see result.json).", ""]
         lines += _residual_section(rnd, out)
@@ -82,6 +87,62 @@ def write_report(res, out: Path) -> Path:
     tmp.write_text("\n".join(lines) + "\n")
     tmp.replace(path)
     return path
+
+
+def _g(x, fmt=".3g") -> str:
+    return "-" if x is None else format(float(x), fmt)
+
+
+def evidence_section(rnd) -> list:
+    """The tests behind the verdict (identification.evidence)."""
+    lines = ["### Evidence", ""]
+    nz = getattr(rnd, "noise", None)
+    ex = getattr(rnd, "excess", None)
+    if nz is not None and ex is not None:
+        src = ("declared in meta.json (sensor.force_noise_std_N)" if nz.source == "declared"
+               else "estimated from the residual's second differences")
+        lines += [f"Noise per channel: {src}. The base was refitted to its own optimum first "
+                  f"(S = sum r^2 / sigma^2: {_g(rnd.base_refined.get('S_start'), '.5g')} -> "
+                  f"{_g(rnd.S_base, '.5g')} over {ex.dof} degrees of freedom)"
+                  + (f"; {len(rnd.base_restarts)} restart(s) from a better base found through an extension"
+                     if rnd.base_restarts else "") + ".", "",
+                  "| channel | sigma, N | estimated, N | mean square / sigma^2 | Ljung-Box p | above the noise |",
+                  "|---|---|---|---|---|---|"]
+        for j, c in enumerate(FORCE_CHANNELS):
+            lines.append(f"| {c.replace('transducer.', '')} | {nz.sigma[j]:.3g} | {nz.estimated[j]:.3g} | "
+                         f"{ex.ratio[j]:.3g} | {ex.lb_p[j]:.2g} | {'yes' if ex.above[j] else 'no'} |")
+        lines += ["", f"(above: mean square at least {EXCESS_MIN:g} sigma^2 and not white, Ljung-Box "
+                      f"Bonferroni-corrected over the channels at {ALPHA:g}.)", ""]
+    tests = getattr(rnd, "tests", [])
+    if tests:
+        lines += [f"Candidates through the extended identification (m = {rnd.hypotheses} hypotheses scanned; "
+                  f"confirmed when the Bonferroni p < {ALPHA:g}, dBIC > 0, the held-out gain > 0 and no "
+                  f"disturbance outside the catalogue does better):", "",
+                  "| effect | q | S ext | dS | scale | dof | statistic T | p | Bonferroni p | dBIC | "
+                  "held-out gain | verdict |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        for t in tests:
+            lr = t.lr
+            ho = "-" if t.holdout is None else f"{100 * t.holdout.gain:+.1f}%"
+            why = "confirmed" if t.supported else "; ".join(t.why_not)
+            lines.append(f"| {t.effect} ({t.label}) | {lr.q} | {t.S:.5g} | {lr.dS:.4g} | {lr.scale:.3g} | "
+                         f"{lr.dof:.2f} | {lr.T:.4g} | {lr.p:.3g} | {lr.p_adj:.3g} | {lr.dbic:+.1f} | {ho} | "
+                         f"{why} |")
+        lines.append("")
+    deps = getattr(rnd, "departures", [])
+    if deps:
+        lines += ["Disturbances outside the catalogue, fitted to the same residual:", "",
+                  "| disturbance | statistic T | Bonferroni p | dBIC | detail |", "|---|---|---|---|---|"]
+        for d in deps:
+            det = ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}" for k, v in d.detail.items())
+            lines.append(f"| {d.family}: {d.label} | {d.test.T:.4g} | {d.test.p_adj:.3g} | {d.test.dbic:+.1f} | "
+                         f"{det} |")
+        lines.append("")
+    dropped = getattr(rnd, "dropped", [])
+    if dropped:
+        lines += ["Candidates dropped (the round went on):", ""]
+        lines += [f"* {d['effect']} ({d['stage']}): {d['reason']}" for d in dropped]
+        lines.append("")
+    return lines
 
 
 def _residual_section(rnd, out: Path) -> list:
@@ -104,7 +165,8 @@ def _residual_section(rnd, out: Path) -> list:
 
 def _extension_section(rnd, base_problem, out: Path) -> list:
     pe = rnd.problem_extended
-    lines = ["### Extended model", "",
+    state = "confirmed" if rnd.confirmed else "tested, not confirmed"
+    lines = [f"### Extended model ({state})", "",
              f"{CATALOGUE[rnd.effect].title} switched on; identified values:", "",
              "| parameter | value |", "|---|---|"]
     lines += [f"| {k} | {v:.5g} |" for k, v in rnd.identified.items()]

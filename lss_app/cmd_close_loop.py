@@ -2,7 +2,12 @@
 report (identification.close_loop; docs/close_loop.md).
 
     lss close-loop MEAS_DIR --model HW --out DIR [--base-evals N] [--max-evals N]
-                   [--window S] [--rounds 2] [--effects a,b] [--seed S]
+                   [--window S] [--rounds 2] [--effects a,b] [--seed S] [--noise declared|estimate]
+
+The record's metadata says what to simulate: its protocol (steady, start-up,
+speed step, stop: from the chain at rest, or the photocell armed after the
+protocol's run-in), layout, transducer cart and sensor (the declared noise
+and zero tolerance).
 """
 from __future__ import annotations
 
@@ -12,7 +17,8 @@ from pathlib import Path
 
 def register(sub, common) -> None:
     from identification.catalogue import CATALOGUE
-    from identification.close_loop import REFINE_EVALS, RESCORE_EVALS
+    from identification.close_loop import (BASE_REFINE_EVALS, PROFILE_POINTS, REFINE_EVALS, RESCORE_EVALS,
+                                           TEST_MAX)
     ap = sub.add_parser("close-loop", parents=[common], help="residual -> missing effect -> extended model",
                         description="Close the loop: residual -> missing effect -> extended model.")
     ap.add_argument("measurement", help="measurement folder (samples.csv + meta.json)")
@@ -31,6 +37,16 @@ def register(sub, common) -> None:
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help="simulations of the local (Levenberg-Marquardt) refinement ending each extended "
                          "identification (0: none)")
+    ap.add_argument("--base-refine-evals", type=int, default=BASE_REFINE_EVALS,
+                    help="simulations of the base's refinement to its own optimum before any test (0: none)")
+    ap.add_argument("--profile-points", type=int, default=PROFILE_POINTS,
+                    help="values at which the base's least-determined variable is scanned, the others refitted, "
+                         "before any test (0: no profile)")
+    ap.add_argument("--candidates", type=int, default=TEST_MAX,
+                    help="candidate effects taken through the extended identification and the tests per round")
+    ap.add_argument("--noise", choices=("declared", "estimate"), default="declared",
+                    help="the force channels' noise for the tests: as declared in meta.json "
+                         "(sensor.force_noise_std_N; estimated when not declared), or estimated from the residual")
     ap.add_argument("--rounds", type=int, default=2, help="rounds of the loop (each finds at most one effect)")
     ap.add_argument("--effects", default=None, help=f"candidate effects (default all: {','.join(CATALOGUE)})")
     ap.add_argument("--seed", type=int, default=0)
@@ -53,11 +69,13 @@ def run(args) -> int:
     from .close_loop_report import write_report
 
     for name, v in (("--base-evals", args.base_evals), ("--max-evals", args.max_evals), ("--rounds", args.rounds),
-                    ("--fit-evals", args.fit_evals)):
+                    ("--fit-evals", args.fit_evals), ("--candidates", args.candidates)):
         if v < 1:
             raise ValueError(f"{name} {v}: must be at least 1")
-    if args.refine_evals < 0:
-        raise ValueError(f"--refine-evals {args.refine_evals}: must be at least 0")
+    for name, v in (("--refine-evals", args.refine_evals), ("--base-refine-evals", args.base_refine_evals),
+                    ("--profile-points", args.profile_points)):
+        if v < 0:
+            raise ValueError(f"{name} {v}: must be at least 0")
     effects = None
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
@@ -74,13 +92,18 @@ def run(args) -> int:
     x_base = None
     if args.base_result:
         x_base = base_from_result(args.base_result, problem)
+    sensor = meas.meta.get("sensor") or {}
     res = close_loop(problem, x_base, effects=effects, rounds=args.rounds, base_evals=args.base_evals,
                      max_evals=args.max_evals, seed=args.seed, out=out, progress=not args.no_progress,
-                     workers=args.workers,
-                     sensor_offset_std=(meas.meta.get("sensor") or {}).get("force_offset_std_N"),
-                     fit_evals=args.fit_evals, refine_evals=args.refine_evals)
+                     workers=args.workers, sensor_offset_std=sensor.get("force_offset_std_N"),
+                     fit_evals=args.fit_evals, refine_evals=args.refine_evals,
+                     base_refine_evals=args.base_refine_evals, test_max=args.candidates,
+                     profile_points=args.profile_points, polish_evals=args.max_evals,
+                     noise_std=sensor.get("force_noise_std_N") if args.noise == "declared" else None)
     write_json_atomic(out / "result.json", res.to_dict())
     report = write_report(res, out)
+    print(f"{meas.id}: {problem.protocol.name} record, layout {problem.layout}, {len(problem.times)} samples "
+          f"({problem.times[-1]:.3g} s)")
     for r in res.rounds:
         print(f"round {r.number}: {r.verdict}")
     print(f"wrote {report} and {out / 'result.json'}")

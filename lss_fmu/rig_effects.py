@@ -10,12 +10,22 @@ parameters from a seed, within ranges chosen to be *detectable* in one
 lap of transducer-cart forces yet physically plausible for a sorter that
 still runs (the module constants below; the reasons are in the docs).
 
-It also makes one artefact that is NOT in the catalogue, for testing that
-the analysis says "nothing in my catalogue explains this":
-`channel_bump`, a smooth pulse on one force channel each time the
-transducer cart passes one place (a loose cable, a bolt hitting a bracket).
-It is added to the FMU record before the sensor model (lss_fmu.sensor), so it
-passes the anti-alias filter like a real force would.
+It also makes artefacts that are NOT in the catalogue, for testing that
+the analysis says "nothing in my catalogue explains this" (issues 7 and 18):
+
+* `channel_bump`, a smooth pulse on one force channel each time the
+  transducer cart passes one place (a loose cable, a bolt hitting a bracket);
+* `interference`, a sinusoid on one force channel at a frequency in Hz that
+  no wheel, cart or motor order of the catalogue reaches (INTERFERENCE_HZ:
+  above the thrust ripple's v / pitch and the wheel orders at the rig's
+  speeds), e.g. a converter's pick-up on an amplifier;
+* `clock_drift`, the logger's clock running fast by a relative eps: sample k
+  is taken at true time t_on + k / (f_s (1 + eps)) but labelled k / f_s;
+* `crosstalk`, one force channel leaking into another: y_j + c F_k.
+
+They are applied to the FMU record before the sensor model (lss_fmu.sensor),
+so they pass the anti-alias filter like a real force would (the clock
+resamples the whole record, the trigger channel included).
 
     params = draw_effects(["wheel_oor", "sensor"], seed=7, layout="layout7")
     truth = effects_truth(["wheel_oor", "sensor"], 7, "layout7")   # with the details
@@ -42,7 +52,7 @@ from .variables import BY_NAME, FORCE_CHANNELS
 
 CATALOGUE = ("wheel_oor", "track_bump", "joint_clearance", "motor_ripple", "resistance", "sensor", "mass")
 ARTEFACT = "channel_bump"
-ARTEFACTS = (ARTEFACT,)
+ARTEFACTS = (ARTEFACT, "interference", "clock_drift", "crosstalk")
 
 DESCRIPTIONS = {
     "wheel_oor": "out-of-round driving wheels on the transducer cart (radial runout, k lobes)",
@@ -54,6 +64,11 @@ DESCRIPTIONS = {
     "mass": "heavier transducer cart (instrumentation) and a spread of the other carts' masses",
     ARTEFACT: "a smooth pulse on ONE force channel when the transducer cart passes one place (a loose "
               "cable, a bolt hitting a bracket); added before the sensor model, not in the catalogue",
+    "interference": "a sinusoid on ONE force channel at a frequency (Hz) unrelated to the wheel, cart and "
+                    "motor orders (electrical pick-up); added before the sensor model, not in the catalogue",
+    "clock_drift": "the logger's clock running slightly fast: the record is time-stretched by 1 + eps; not "
+                   "in the catalogue",
+    "crosstalk": "one force channel leaking into another (y_j + c F_k); not in the catalogue",
 }
 
 # --- the draw ranges (uniform unless said); docs/measurements.md gives the reasons --------------
@@ -102,6 +117,13 @@ ARTEFACT_DURATION = (0.1, 0.3)             # s, raised-cosine pulse, full width
 ARTEFACT_REL_AMPLITUDE = (0.05, 0.15)      # of the channel's range (1st to 99th percentile after arming)
 ARTEFACT_RANGE_FLOOR_N = 150.0             # the range used is at least this (quiet channels)
 ARTEFACT_MARGIN_M = 2.0                    # m kept clear of the trigger point on each side
+# interference: above the thrust ripple's band (v / pitch <= 3 m/s / 0.05 m = 60 Hz) and the orders of an
+# out-of-round wheel (k <= 6 lobes and harmonics: 6 v / (2 pi 0.05 m) = 57 Hz at 3 m/s), below the
+# logger's anti-alias cutoff (100 Hz)
+INTERFERENCE_HZ = (62.0, 92.0)
+INTERFERENCE_REL_AMPLITUDE = (0.01, 0.04)  # of the channel's range (as ARTEFACT_RANGE_FLOOR_N)
+CLOCK_DRIFT = (1.0e-3, 4.0e-3)             # relative: the logger's clock this much fast
+CROSSTALK_FACTOR = (0.02, 0.06)            # of the source channel's force, either sign
 
 # The FMU parameters each effect may set (the sensor effect sets those of its drawn channels only)
 _CH = [c.removeprefix("transducer.") for c in FORCE_CHANNELS]
@@ -171,7 +193,7 @@ def parse_effects(names: Union[str, Iterable[str], None], option: str = "effects
 
 
 def parse_artefacts(names: Union[str, Iterable[str], None], option: str = "artefact") -> list:
-    """Like parse_effects for the artefacts outside the catalogue (known: channel_bump)."""
+    """Like parse_effects for the artefacts outside the catalogue (ARTEFACTS)."""
     got = _split(names)
     bad = [n for n in got if n not in ARTEFACTS]
     if bad:
@@ -314,12 +336,18 @@ def draw_artefacts(names, seed: int, track_length: float, stream: int = 0,
     """{name: definition} of the named artefacts. channel_bump: one force channel,
     the arc position s where it happens (uniform on the track, at least
     ARTEFACT_MARGIN_M from `avoid_s`, the trigger point, so a logged lap holds
-    the whole pulse), its duration, relative amplitude and sign."""
+    the whole pulse), its duration, relative amplitude and sign. interference:
+    the channel, the frequency (INTERFERENCE_HZ), the relative amplitude and
+    the phase. clock_drift: eps. crosstalk: the channel it leaks into, the
+    one it comes from and the factor."""
     names = parse_artefacts(names)
     L = float(track_length)
     out = {}
     for name in names:
         rng = _rng(seed, stream, 100 + ARTEFACTS.index(name))
+        if name != ARTEFACT:
+            out[name] = {"description": DESCRIPTIONS[name], **_draw_other(name, rng)}
+            continue
         channel = FORCE_CHANNELS[int(rng.integers(len(FORCE_CHANNELS)))]
         u = float(rng.random())
         if avoid_s is None:
@@ -331,6 +359,73 @@ def draw_artefacts(names, seed: int, track_length: float, stream: int = 0,
                      "duration_s": float(rng.uniform(*ARTEFACT_DURATION)),
                      "relative_amplitude": float(rng.uniform(*ARTEFACT_REL_AMPLITUDE)),
                      "sign": 1 if rng.random() < 0.5 else -1}
+    return out
+
+
+def _draw_other(name: str, rng: np.random.Generator) -> dict:
+    if name == "interference":
+        return {"channel": FORCE_CHANNELS[int(rng.integers(len(FORCE_CHANNELS)))],
+                "frequency_hz": float(rng.uniform(*INTERFERENCE_HZ)),
+                "relative_amplitude": float(rng.uniform(*INTERFERENCE_REL_AMPLITUDE)),
+                "phase": float(rng.uniform(0.0, 2.0 * math.pi))}
+    if name == "clock_drift":
+        return {"eps": float(rng.uniform(*CLOCK_DRIFT))}
+    if name == "crosstalk":
+        j, k = (int(i) for i in rng.choice(len(FORCE_CHANNELS), size=2, replace=False))
+        return {"into": FORCE_CHANNELS[j], "from": FORCE_CHANNELS[k], "factor": _signed(rng, *CROSSTALK_FACTOR)}
+    raise ValueError(f"unknown artefact {name!r} (known: {', '.join(ARTEFACTS)})")
+
+
+def channel_range(x: np.ndarray) -> float:
+    """The range a relative artefact amplitude refers to: 1st to 99th percentile, at least the floor."""
+    return max(float(np.percentile(x, 99) - np.percentile(x, 1)), ARTEFACT_RANGE_FLOOR_N)
+
+
+def interference_signal(t: np.ndarray, artefact: Mapping, amplitude: float) -> np.ndarray:
+    return amplitude * np.sin(2.0 * math.pi * float(artefact["frequency_hz"]) * np.asarray(t, float)
+                              + float(artefact["phase"]))
+
+
+def add_to_forces(t: np.ndarray, forces: np.ndarray, artefact_name: str, artefact: Mapping,
+                  ranges: Optional[np.ndarray] = None) -> tuple:
+    """interference or crosstalk added to an array of the 7 forces (n, 7) at the
+    times t (s); `ranges`: each channel's range for a relative amplitude
+    (default: from `forces`). Returns (forces, info)."""
+    F = np.array(forces, float)
+    if artefact_name == "interference":
+        j = FORCE_CHANNELS.index(artefact["channel"])
+        rng_N = float(ranges[j]) if ranges is not None else channel_range(F[:, j])
+        amp = float(artefact["relative_amplitude"]) * rng_N
+        F[:, j] += interference_signal(t, artefact, amp)
+        return F, {"channel": artefact["channel"], "amplitude_N": amp, "frequency_hz": artefact["frequency_hz"]}
+    if artefact_name == "crosstalk":
+        j, k = FORCE_CHANNELS.index(artefact["into"]), FORCE_CHANNELS.index(artefact["from"])
+        F[:, j] += float(artefact["factor"]) * np.asarray(forces, float)[:, k]
+        return F, {"into": artefact["into"], "from": artefact["from"], "factor": artefact["factor"]}
+    raise ValueError(f"{artefact_name}: not an additive artefact")
+
+
+def clock_resample(record: pd.DataFrame, eps: float, anchor: float = 0.0, s_channel: str = "transducer.s",
+                   track_length: Optional[float] = None) -> pd.DataFrame:
+    """The record as a logger whose clock runs fast by eps sees it: every column
+    at record time tau holds the value of true time anchor + (tau - anchor) / (1 + eps)
+    (4-point cubics on the uniform grid; the wrapped track position unwrapped first)."""
+    from .sensor import interp_cubic
+    t = record["time"].to_numpy(dtype=float)
+    h = (t[-1] - t[0]) / (len(t) - 1)
+    src = anchor + (t - anchor) / (1.0 + float(eps))
+    src = np.clip(src, t[1], t[-3])
+    out = record.copy()
+    cols = [c for c in record.columns if c != "time"]
+    Y = record[cols].to_numpy(dtype=float)
+    L = track_length
+    if s_channel in cols and L:
+        i = cols.index(s_channel)
+        Y[:, i] = np.unwrap(Y[:, i], period=float(L))
+    Z = interp_cubic(t[0], h, Y, src)
+    if s_channel in cols and L:
+        Z[:, i] = np.mod(Z[:, i], float(L))
+    out[cols] = Z
     return out
 
 
@@ -385,11 +480,24 @@ def apply_channel_bump(record: pd.DataFrame, artefact: Mapping, track_length: fl
 
 
 def apply_artefacts(record: pd.DataFrame, artefacts: Mapping, track_length: float, arm_time: float = 0.0):
-    """Apply every artefact of {name: definition}; returns (record, {name: info})."""
+    """Apply every artefact of {name: definition}; returns (record, {name: info}).
+    Relative amplitudes refer to the record after arm_time; the clock's
+    stretch is anchored at arm_time (the trigger comes after it)."""
     infos = {}
     for name, art in artefacts.items():
         if name == ARTEFACT:
             record, infos[name] = apply_channel_bump(record, art, track_length, arm_time)
+        elif name in ("interference", "crosstalk"):
+            t = record["time"].to_numpy(dtype=float)
+            F = record[FORCE_CHANNELS].to_numpy(dtype=float)
+            sel = t >= arm_time
+            ranges = np.array([channel_range(F[sel if sel.any() else slice(None), j]) for j in range(F.shape[1])])
+            F2, infos[name] = add_to_forces(t, F, name, art, ranges)
+            record = record.copy()
+            record[FORCE_CHANNELS] = F2
+        elif name == "clock_drift":
+            record = clock_resample(record, float(art["eps"]), arm_time, track_length=track_length)
+            infos[name] = {"eps": float(art["eps"]), "anchor_s": float(arm_time)}
         else:
             raise ValueError(f"unknown artefact {name!r} (known: {', '.join(ARTEFACTS)})")
     return record, infos

@@ -55,12 +55,19 @@ def crossing_fraction(s_prev: float, s_cur: float, s_m: float, length: float) ->
 
 
 def sample_rate_of(times: np.ndarray) -> float:
-    """The sample rate of a regular time column (Hz), rounded to 1e-6 Hz so
-    that the last bits of the spacing do not change the simulation grid."""
+    """The sample rate of a regular time column (Hz): from the whole span (the
+    median spacing of a column rounded to 1 us is off by 1e-4), snapped to a
+    whole number of Hz when within 1e-4 of it, else rounded to 1e-3 Hz, so
+    that neither the last bits of the spacing nor the column's rounding change
+    the simulation grid (issue 18)."""
     times = np.asarray(times, float)
-    if len(times) < 2:
+    if len(times) < 2 or not times[-1] > times[0]:
         return 300.0
-    return round(1.0 / float(np.median(np.diff(times))), 6)
+    rate = (len(times) - 1) / float(times[-1] - times[0])
+    whole = round(rate)
+    if whole > 0 and abs(rate - whole) <= 1e-4 * rate:
+        return float(whole)
+    return round(rate, 3)
 
 
 def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: float,
@@ -68,7 +75,8 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
                        channels: Sequence[str] = FORCE_CHANNELS, max_wait: float | None = None,
                        tolerance: float | None = None, step: float | None = None,
                        history: float = 0.0, sample_rate: Optional[float] = None,
-                       after_trigger: Optional[Callable[[float], float]] = None) -> np.ndarray:
+                       after_trigger: Optional[Callable[[float], float]] = None,
+                       info: Optional[dict] = None) -> np.ndarray:
     """Outputs `channels` at `sample_times` (s after the trigger crossing) as an
     array (len(sample_times), len(channels)).
 
@@ -79,6 +87,8 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
     crossing are kept too, so that sample times down to -history can be asked
     for. `after_trigger`: the speed set point as a function of the time since
     the trigger (a speed step, a stop); params' drive.v_ref holds until then.
+    `info` (a dict) gets the crossing time t_cross, the arming time t_arm and
+    the grid step h, in simulation time.
     Raises SimulationError if the run fails or the cart never reaches s_m
     within `max_wait` s after arming."""
     sample_times = np.asarray(sample_times, float)
@@ -123,6 +133,8 @@ def simulate_triggered(sim: ChainSimulator, params: Mapping[str, object], s_m: f
     data = np.asarray(rows)
     if not np.all(np.isfinite(data)):
         raise SimulationError("the simulated outputs are not finite")
+    if info is not None:
+        info.update({"t_cross": float(t_cross), "t_arm": t_arm, "h": h})
     return interp_cubic(t0 - t_cross, h, data, sample_times)
 
 

@@ -1,13 +1,17 @@
-"""Closing the loop on data with undeclared effects (issue 7).
+"""Closing the loop on data with undeclared effects (issues 7 and 18).
 
 Each case: the release transient of layout 7 measured with effects switched on
-(drawn by the virtual transducer cart's draw from a seed, so nothing is tuned
-to one case), the loop told nothing about them. The loop identifies the base
-model, ranks the catalogue, extends the model with the winner, identifies
-again. What must hold: the right effect ranked first, the extended objective
-at most half of the base one, the identified amplitude within 25 % of the
-truth; no false alarm without an effect; two effects found in turn; an
-artefact outside the catalogue reported as such and located.
+(drawn by the virtual transducer cart's draw from a seed, or given), the loop
+told nothing about them. The loop identifies the base model, refits it to
+its own optimum, ranks the catalogue, tests the leading candidates against
+the noise (likelihood ratio, BIC, held-out validation, disturbances outside
+the catalogue) and extends the model with a confirmed one. What must hold:
+the right effect confirmed with its evidence, the extended objective at most
+half of the base one, the identified amplitude within 25 % of the truth; on
+a clean record nothing confirmed; a gain-only sensor error confirmed as a
+sensor fault; two effects found in turn; disturbances outside the catalogue
+reported as such and located; a degenerate candidate dropped with its
+reason while the loop goes on.
 """
 from __future__ import annotations
 
@@ -16,15 +20,17 @@ import pytest
 
 from identification import catalogue
 from identification.close_loop import close_loop
+from identification.evidence import ALPHA
 from identification.synthetic import effect_case
 
 BASE_EVALS = 120
 EXT_EVALS = 200   # the extended design has 5 to 8 variables: 120 evaluations stop short
+QUICK = dict(base_evals=80, max_evals=100, refine_evals=40)   # where no amplitude is checked
 
 
-def _loop(problem, rounds=1, effects=None):
-    return close_loop(problem, effects=effects, rounds=rounds, base_evals=BASE_EVALS, max_evals=EXT_EVALS,
-                      seed=0)
+def _loop(problem, rounds=1, effects=None, **kw):
+    kw = {"base_evals": BASE_EVALS, "max_evals": EXT_EVALS, **kw}
+    return close_loop(problem, effects=effects, rounds=rounds, seed=0, **kw)
 
 
 def _record(name: str, res, **extra) -> None:
@@ -32,29 +38,33 @@ def _record(name: str, res, **extra) -> None:
     from lss_fmu.atomic import write_json_atomic
     from lss_fmu.build import BUILD
     write_json_atomic(BUILD / "close_loop_cases" / f"{name}.json",
-                      {"case": name, "found": res.found, "verdict": res.verdict,
-                       "rounds": [{"effect": r.effect, "f_base": r.f_base, "f_extended": r.f_extended,
-                                   "amplitude": r.amplitude, "identified": r.identified,
-                                   "ranking": [(h.effect, h.share, h.share_fit) for h in r.attribution.ranking]}
-                                  for r in res.rounds], **extra})
+                      {"case": name, "found": res.found, "verdict": res.verdict, "outcome": res.outcome,
+                       "rounds": [r.to_dict() | {"attribution": None} for r in res.rounds], **extra})
 
 
 def _true_amplitude(effect: str, params: dict, problem) -> float:
     return catalogue.CATALOGUE[effect].amplitude(params, problem.samples.mean(axis=0))
 
 
-FOUR = ["sensor", "wheel_oor", "joint_clearance", "mass"]
+def _evidence_reported(rnd) -> None:
+    """Every verdict carries its statistic, p-values and held-out gain."""
+    d = rnd.to_dict()
+    ev = d["evidence"]
+    assert ev is not None and {"statistic", "p", "p_bonferroni", "dbic", "holdout_gain"} <= set(ev)
+    assert d["noise"]["source"] in ("declared", "estimated") and d["excess"] is not None
+    assert str(round(ev["statistic"], 1)) in rnd.verdict.replace(",", "") or "LR statistic" in rnd.verdict
 
 
-# one seed per effect, two seeds across them (each case costs a minute and a half of CPU);
-# every effect passed at both seeds 11 and 12 when this was written
+# one seed per effect (each case costs about 45 CPU-s); the other seed of each passed when written
 @pytest.mark.parametrize("effect, seed", [("sensor", 11), ("wheel_oor", 12), ("joint_clearance", 11), ("mass", 12)])
 def test_undeclared_effect_is_found_and_fitted(fmu_file, effect, seed):
     problem, params = effect_case([effect], seed)
     res = _loop(problem)
     rnd = res.rounds[0]
-    assert rnd.attribution.ranking[0].effect == effect, rnd.verdict
-    assert rnd.confirmed, rnd.verdict
+    assert rnd.confirmed and rnd.effect == effect and rnd.outcome == "confirmed", rnd.verdict
+    ev = rnd.evidence
+    assert ev.lr.p_adj < ALPHA and ev.lr.dbic > 0 and ev.holdout.gain > 0
+    _evidence_reported(rnd)
     assert rnd.f_extended <= 0.5 * rnd.f_base, (rnd.f_base, rnd.f_extended)
     want = _true_amplitude(effect, params, problem)
     got = rnd.amplitude
@@ -66,17 +76,35 @@ def test_undeclared_effect_is_found_and_fitted(fmu_file, effect, seed):
     assert abs(got - want) <= 0.25 * abs(want), (effect, got, want, rnd.identified)
 
 
-def test_no_effect_no_false_alarm(fmu_file):
-    problem, _ = effect_case([], 21)
-    res = _loop(problem)
-    _record("none_21", res)
+@pytest.mark.parametrize("seed", [22])
+def test_clean_record_nothing_confirmed(fmu_file, seed):
+    """No effect at all: the base refitted to its optimum leaves noise, and no
+    candidate passes (the old share rule confirmed a track bump here)."""
+    problem, _ = effect_case([], seed)
+    res = _loop(problem, **QUICK)
+    rnd = res.rounds[0]
+    _record(f"none_{seed}", res)
     assert res.found == []
-    assert res.verdict.startswith("nothing significant"), res.verdict
+    assert rnd.outcome == "nothing significant", rnd.verdict
+    assert rnd.tests and all(not t.supported for t in rnd.tests)
+    _evidence_reported(rnd)
+    assert float(np.max(rnd.excess.ratio)) < 1.5
 
 
-# two seeds (a round wheel's runout with zero errors on different channels); seed 33 is a
-# known failure, recorded in docs/close_loop.md: a -250 N zero error on F_x first passes for a bump
-@pytest.mark.parametrize("seed", [31, 32])
+def test_gain_only_sensor_error_is_a_sensor_fault(fmu_file):
+    """A 5 % gain error on one steering channel, no offset: confirmed as the
+    sensor effect (it was confirmed as a motor ripple), the gain identified."""
+    params = {"effects.sensor.gain.steering.F_right": 0.05}
+    problem, _ = effect_case([], 7, params=params)
+    res = _loop(problem)
+    rnd = res.rounds[0]
+    _record("gain_only_7", res, truth=params)
+    assert res.found == ["sensor"], rnd.verdict
+    assert abs(rnd.identified["effects.sensor.gain.steering.F_right"] - 0.05) <= 0.25 * 0.05, rnd.identified
+
+
+# two seeds (a round wheel's runout with zero errors on different channels)
+@pytest.mark.parametrize("seed", [31])
 def test_two_effects_are_found_in_turn(fmu_file, seed):
     problem, params = effect_case(["wheel_oor", "sensor"], seed)
     res = _loop(problem, rounds=2)
@@ -91,11 +119,61 @@ def test_artefact_outside_the_catalogue_is_reported_and_located(fmu_file):
            "t": float(rng.uniform(0.3, 0.8)), "width": float(rng.uniform(0.08, 0.15)),
            "amplitude": float(rng.choice([-1, 1]) * rng.uniform(50.0, 80.0))}
     problem, _ = effect_case([], 41, artefact=art)
-    res = _loop(problem)
+    res = _loop(problem, **QUICK)
     rnd = res.rounds[0]
     _record("artefact_41", res, artefact=art, location=rnd.location)
     assert res.found == []
-    assert rnd.verdict.startswith("no effect in the catalogue explains"), rnd.verdict
+    assert rnd.outcome == "not in the catalogue" and rnd.verdict.startswith("not in the catalogue"), rnd.verdict
     loc = rnd.location
     assert loc["channel"] == art["channel"]
     assert loc["t_start"] - 0.05 <= art["t"] <= loc["t_end"] + 0.05, loc
+
+
+@pytest.mark.parametrize("name, family", [("crosstalk", "crosstalk"), ("clock_drift", "clock")])
+def test_disturbance_outside_the_catalogue_is_not_confirmed(fmu_file, name, family):
+    """Crosstalk between channels, the logger's clock running fast (drawn by the
+    rig, lss_fmu.rig_effects): "not in the catalogue", the disturbance named,
+    never a catalogue effect (the interference: tests/test_evidence.py and
+    docs/close_loop.md)."""
+    problem, _ = effect_case([], 5, artefacts=[name])
+    res = _loop(problem, **QUICK)
+    rnd = res.rounds[0]
+    _record(f"ooc_{name}_5", res)
+    assert res.found == [] and rnd.outcome == "not in the catalogue", rnd.verdict
+    best = max(rnd.departures, key=lambda d: d.test.dbic)
+    assert best.family == family and best.test.significant, [(d.label, d.test.dbic) for d in rnd.departures]
+    assert "Where:" in rnd.verdict and rnd.location.get("channel")
+
+
+def test_degenerate_candidates_are_dropped_and_the_loop_goes_on(fmu_file, monkeypatch):
+    """The transducer on a cart on a straight, where the steering channels are
+    constant (the guide wheel's preload): a gain there is the same column as
+    the offset, and is dropped as not identifiable; the channel's error is
+    still found, as an offset (gain times the level plus offset). And
+    a candidate whose bounds fall outside the FMU's range (issue 18: the run
+    ended with `no room within the FMU's range`) is dropped with its reason."""
+    from identification import close_loop as CL
+    from identification.catalogue import Extension
+    params = {"effects.sensor.offset.steering.F_left": 40.0, "effects.sensor.gain.steering.F_left": 0.2}
+    problem, _ = effect_case([], 8, params=params, transducer=7)
+    assert np.ptp(problem.samples[:, 3]) < 30.0          # the channel barely moves (noise and the fault)
+    real = CL.extension_of
+
+    def broken(sc):
+        if sc.effect == "mass":   # what the degenerate sensor fit did: bounds beyond the FMU's range
+            return Extension({"effects.mass.transducer_factor": (7.0, 9.0)}, {"effects.mass.transducer_factor": 8.0}, {})
+        return real(sc)
+    monkeypatch.setattr(CL, "extension_of", broken)
+    res = _loop(problem, effects=["sensor", "mass", "resistance"], **QUICK)
+    rnd = res.rounds[0]
+    _record("degenerate_8", res, truth=params)
+    notes = [n for h in rnd.attribution.all_hypotheses for n in h.notes]
+    assert any("steering.F_left: not identifiable" in n for n in notes), notes
+    assert any(d["effect"] == "mass" and "no room within the FMU's range" in d["reason"] for d in rnd.dropped), \
+        rnd.dropped
+    assert res.found == ["sensor"], rnd.verdict
+    measured = float(problem.samples[:, 3].mean())
+    want = 0.2 * (measured - 40.0) / 1.2 + 40.0      # the error at the channel's level
+    # within 3 sigma of the in-specification zero the record also carries (6 N on this channel)
+    assert abs(rnd.identified["effects.sensor.offset.steering.F_left"] - want) < 18.0, (rnd.identified, want)
+    assert "effects.sensor.gain.steering.F_left" not in rnd.identified

@@ -36,6 +36,32 @@ def test_close_loop_writes_report_and_result(measurement, tmp_path, capsys):
     assert "effects" not in (measurement / "meta.json").read_text()
 
 
+@pytest.mark.parametrize("protocol, number, lap", [("start-up", 1, 0.6), ("stop", 20, 1.3)])
+def test_close_loop_follows_the_record_protocol(tmp_path_factory, fmu_file, capsys, protocol, number, lap):
+    """A transient record (issue 18): the loop simulates what its metadata says
+    (from rest, or the photocell then the stop), and reports the verdict with
+    its evidence; the record's declared noise is used."""
+    data = tmp_path_factory.mktemp(f"rig_{protocol}")
+    assert lss(["rig", "--set", "recovery", "--out", str(data), "--measurements", str(number), "--workers", "1",
+                "--lap-seconds", str(lap), "--no-progress", "--protocol", protocol]) == 0
+    out = data / "loop"
+    code = lss(["close-loop", str(data / f"m{number:02d}"), "--model", "LW", "--out", str(out), "--free", "e_SW,e_RW",
+                "--effects", "mass,sensor", "--base-evals", "6", "--max-evals", "6", "--fit-evals", "3",
+                "--rounds", "1", "--refine-evals", "5", "--base-refine-evals", "10", "--profile-points", "0",
+                "--no-progress"])
+    text = capsys.readouterr()
+    assert code == 0, text.err
+    assert f"{protocol} record" in text.out
+    res = json.loads((out / "result.json").read_text())
+    assert res["protocol"] == protocol
+    rnd = res["rounds"][0]
+    assert rnd["outcome"] in ("confirmed", "not in the catalogue", "nothing significant")
+    assert rnd["noise"]["source"] == "declared"
+    assert rnd["evidence"] is None or {"statistic", "p", "p_bonferroni", "holdout_gain"} <= set(rnd["evidence"])
+    report = (out / "report.md").read_text()
+    assert "### Evidence" in report and "Bonferroni" in report
+
+
 @pytest.mark.parametrize("args, message", [
     (["--effects", "wheel_oor,flat_tyre"], "unknown flat_tyre"),
     (["--rounds", "0"], "--rounds 0"),
