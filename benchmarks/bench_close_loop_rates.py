@@ -20,7 +20,7 @@ Every case is written atomically to benchmarks/results/close_loop_rates/
 process, one core (the machine is shared).
 
     .venv/bin/python benchmarks/bench_close_loop_rates.py run [--part clean|detect|ooc|all] [--records 10]
-        [--families mass,track_bump] [--amplitudes-index 0,1]
+        [--families mass,track_bump] [--amplitudes-index 0,1] [--ids ID,ID] [--limit N]
     .venv/bin/python benchmarks/bench_close_loop_rates.py report [--figure docs/figures/close_loop_rates.png]
 """
 from __future__ import annotations
@@ -80,11 +80,11 @@ def _rng(*key) -> np.random.Generator:
 
 
 # ------------------------------------------------------------------------------------------ the cases
-def cases(part: str, records: int, families=None, amp_index=None) -> list:
+def cases(part: str, records: int, families=None, amp_index=None, syn_clean: int = SYN_CLEAN) -> list:
     out = []
     if part in ("clean", "all"):
         out += [{"id": f"clean_syn_{r:02d}", "kind": "clean", "source": "synthetic", "record": r}
-                for r in range(SYN_CLEAN)]
+                for r in range(syn_clean)]
         out += [{"id": f"clean_rig_{proto}_m{n:02d}", "kind": "clean", "source": "rig", "protocol": proto,
                  "number": n, "window": wdw} for proto, n, wdw in RIG_CLEAN]
     if part in ("detect", "all"):
@@ -227,7 +227,10 @@ def cmd_run(args) -> int:
     logging.basicConfig(level=logging.ERROR)
     fams = [f for f in args.families.split(",") if f] if args.families else None
     amp_index = [int(i) for i in args.amplitudes_index.split(",")] if args.amplitudes_index else None
-    todo = cases(args.part, args.records, fams, amp_index)
+    todo = cases(args.part, args.records, fams, amp_index, args.syn_clean)
+    if args.ids:   # these cases, in this order (a short run takes the most telling first)
+        by_id = {c["id"]: c for c in todo}
+        todo = [by_id[i] for i in args.ids.split(",") if i in by_id]
     RESULTS.mkdir(parents=True, exist_ok=True)
     done = 0
     for case in todo:
@@ -348,6 +351,8 @@ def main(argv=None) -> int:
     r.add_argument("--families", default=None)
     r.add_argument("--amplitudes-index", default=None)
     r.add_argument("--limit", type=int, default=0, help="stop after this many new cases (0: all)")
+    r.add_argument("--ids", default=None, help="only these case ids, in this order")
+    r.add_argument("--syn-clean", type=int, default=SYN_CLEAN, help="synthetic clean records")
     r.set_defaults(run=cmd_run)
     p = sub.add_parser("report")
     p.add_argument("--figure", default=str(ROOT / "docs" / "figures" / "close_loop_rates.png"))

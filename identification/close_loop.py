@@ -764,8 +764,9 @@ def _decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.n
 
 def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
     """Each significant disturbance outside the catalogue tested again on the
-    supported candidate's extended residual, beyond the base's columns and
-    every probe of the candidate's hypothesis (evidence.beyond): if one still
+    supported candidate's extended residual, beyond the base's columns, every
+    probe of the candidate's hypothesis and every channel's gain and offset
+    (a second effect left for the next round; evidence.beyond): if one still
     explains a significant part (its own Bonferroni p < ALPHA and dBIC > 0),
     the candidate only took a share of something the catalogue does not
     contain, and is not confirmed."""
@@ -780,6 +781,7 @@ def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
     # beyond the base and all the effect can do (every probe of its hypothesis: a sensor extension
     # that freed too few channels leaves a gain error that crosstalk from a correlated channel mimics)
     J = list(rnd.attribution.base_columns if rnd.attribution is not None else ()) + list(sup.signature or ())
+    J += _sensor_columns(rnd.base_problem, rnd.x_base)   # a second effect, most often a sensor fault
     for d in deps:
         t = beyond(d, r_e, w, J, looks=len(deps))
         d.detail["beyond_candidate"] = None if t is None else {"effect": sup.effect, "T": float(t.T),
@@ -789,6 +791,29 @@ def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
             sup.why_not.append(f"a disturbance outside the catalogue remains beyond it ({d.label}: Bonferroni p = "
                                f"{t.p_adj:.2g}, dBIC {t.dbic:+.1f} on the extended residual)")
             return
+
+
+def _sensor_columns(base: Optional[IdentificationProblem], x) -> list:
+    """Every channel's gain and offset at the base (no run beyond the base's):
+    what a sensor fault can do, tared channels demeaned. Empty when the base
+    cannot be simulated."""
+    if base is None or x is None:
+        return []
+    try:
+        sim = base.simulate(np.asarray(x, float))
+    except Exception as exc:
+        log.warning("sensor columns unavailable: %s", exc)
+        return []
+    demean = np.zeros(sim.shape[1], bool)
+    if base.tare is not None:
+        demean = np.abs((base.samples - sim).mean(axis=0)) <= base.tare
+    out = []
+    for j in range(sim.shape[1]):
+        for col in (sim[:, j], np.ones(len(sim))):
+            g = np.zeros_like(sim)
+            g[:, j] = col
+            out.append(demean_columns(g, demean))
+    return out
 
 
 def _budget(evals: int, problem: IdentificationProblem, effect: str) -> int:

@@ -62,7 +62,7 @@ HOLDOUT_BLOCKS = 16     # interleaved blocks of the held-out validation (two fol
 TRIM = 0.9              # the noise estimate keeps the smallest 90 % of the squared second differences
 EXCESS_MIN = 1.5        # a channel is above the noise when its mean square exceeds sigma^2 by this factor ...
 LB_LAGS = 20            # ... and a Ljung-Box test over this many lags rejects whiteness (Bonferroni, 7 channels)
-CLOCK_MAX = 0.02        # |relative clock error| searched by the clock departure
+CLOCK_MAX = 0.01        # |relative clock error| searched by the clock departure (crystal or RC: within 1 %)
 PULSE_WIDTHS = (0.05, 0.1, 0.2)   # s, widths of the transient departure
 SHORT = {c: c.replace("transducer.", "") for c in FORCE_CHANNELS}
 

@@ -89,12 +89,18 @@ def run_close_loop_stage(out: Path) -> list[str]:
         f"({report.relative_to(out)}).\n",
         f"![attribution](close_loop/round{rnd.number}_attribution.png)\n",
         "### A disturbance outside the catalogue\n",
-        f"The same transient with {OOC} drawn by the rig ({', '.join(f'{k} {v}' for k, v in drawn.items() if k != 'description')}); "
+        f"The same transient with {OOC} drawn by the rig ({_drawn(drawn)}); "
         "nothing in the catalogue is switched on.\n",
         f"**Verdict ({res2.outcome}):** {res2.verdict}.\n",
         *_evidence(res2.rounds[0]),
         f"Its report: [{report2.relative_to(out)}]({report2.relative_to(out)}).\n",
     ]
+
+
+def _drawn(drawn: dict) -> str:
+    """The drawn disturbance's parameters, for a sentence."""
+    return ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in drawn.items()
+                     if k != "description")
 
 
 def _evidence(rnd) -> list:

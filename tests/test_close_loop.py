@@ -26,6 +26,7 @@ from identification.synthetic import effect_case
 BASE_EVALS = 120
 EXT_EVALS = 200   # the extended design has 5 to 8 variables: 120 evaluations stop short
 QUICK = dict(base_evals=80, max_evals=100, refine_evals=40)   # where no amplitude is checked
+LEAN = dict(QUICK, profile_points=0)   # and where the disturbance, not the base's last digits, decides
 
 
 def _loop(problem, rounds=1, effects=None, **kw):
@@ -55,8 +56,10 @@ def _evidence_reported(rnd) -> None:
     assert str(round(ev["statistic"], 1)) in rnd.verdict.replace(",", "") or "LR statistic" in rnd.verdict
 
 
-# one seed per effect (each case costs about 45 CPU-s); the other seed of each passed when written
-@pytest.mark.parametrize("effect, seed", [("sensor", 11), ("wheel_oor", 12), ("joint_clearance", 11), ("mass", 12)])
+# one seed per effect (each case costs about 40 CPU-s; the out-of-round wheel: the two-effects case and
+# the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were confirmed too when written
+# (docs/close_loop.md); the rates over many records: benchmarks/bench_close_loop_rates.py
+@pytest.mark.parametrize("effect, seed", [("sensor", 11), ("joint_clearance", 11), ("mass", 12)])
 def test_undeclared_effect_is_found_and_fitted(fmu_file, effect, seed):
     problem, params = effect_case([effect], seed)
     res = _loop(problem)
@@ -103,7 +106,7 @@ def test_gain_only_sensor_error_is_a_sensor_fault(fmu_file):
     assert abs(rnd.identified["effects.sensor.gain.steering.F_right"] - 0.05) <= 0.25 * 0.05, rnd.identified
 
 
-# two seeds (a round wheel's runout with zero errors on different channels)
+# an out-of-round wheel and zero errors on two channels (seed 32 passed too when written, before issue 18)
 @pytest.mark.parametrize("seed", [31])
 def test_two_effects_are_found_in_turn(fmu_file, seed):
     problem, params = effect_case(["wheel_oor", "sensor"], seed)
@@ -119,7 +122,7 @@ def test_artefact_outside_the_catalogue_is_reported_and_located(fmu_file):
            "t": float(rng.uniform(0.3, 0.8)), "width": float(rng.uniform(0.08, 0.15)),
            "amplitude": float(rng.choice([-1, 1]) * rng.uniform(50.0, 80.0))}
     problem, _ = effect_case([], 41, artefact=art)
-    res = _loop(problem, **QUICK)
+    res = _loop(problem, **LEAN)
     rnd = res.rounds[0]
     _record("artefact_41", res, artefact=art, location=rnd.location)
     assert res.found == []
@@ -136,7 +139,7 @@ def test_disturbance_outside_the_catalogue_is_not_confirmed(fmu_file, name, fami
     never a catalogue effect (the interference: tests/test_evidence.py and
     docs/close_loop.md)."""
     problem, _ = effect_case([], 5, artefacts=[name])
-    res = _loop(problem, **QUICK)
+    res = _loop(problem, **LEAN)
     rnd = res.rounds[0]
     _record(f"ooc_{name}_5", res)
     assert res.found == [] and rnd.outcome == "not in the catalogue", rnd.verdict
@@ -164,7 +167,7 @@ def test_degenerate_candidates_are_dropped_and_the_loop_goes_on(fmu_file, monkey
             return Extension({"effects.mass.transducer_factor": (7.0, 9.0)}, {"effects.mass.transducer_factor": 8.0}, {})
         return real(sc)
     monkeypatch.setattr(CL, "extension_of", broken)
-    res = _loop(problem, effects=["sensor", "mass", "resistance"], **QUICK)
+    res = _loop(problem, effects=["sensor", "mass", "resistance"], **LEAN)
     rnd = res.rounds[0]
     _record("degenerate_8", res, truth=params)
     notes = [n for h in rnd.attribution.all_hypotheses for n in h.notes]

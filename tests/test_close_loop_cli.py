@@ -21,7 +21,7 @@ def test_close_loop_writes_report_and_result(measurement, tmp_path, capsys):
     out = tmp_path / "loop"
     code = lss(["close-loop", str(measurement), "--model", "LW", "--out", str(out), "--free", "e_SW,e_RW",
                 "--effects", "mass,sensor", "--base-evals", "5", "--max-evals", "5", "--fit-evals", "3", "--rounds", "1",
-                "--refine-evals", "5", "--no-progress"])
+                "--refine-evals", "5", "--base-refine-evals", "10", "--profile-points", "0", "--no-progress"])
     assert code == 0, capsys.readouterr().err
     res = json.loads((out / "result.json").read_text())
     assert res["measurement"].endswith("m20") and res["model"] == "LW"

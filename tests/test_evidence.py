@@ -9,6 +9,8 @@ catalogue are told apart.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -133,3 +135,26 @@ def test_excess_tells_noise_from_structure():
     assert not E.excess(white, SIG).any
     e = E.excess(white + _smooth(rng, 2.0) * (np.arange(K) == 3), SIG)
     assert list(np.nonzero(e.above)[0]) == [3]
+
+
+def test_a_departure_beyond_the_candidate():
+    """evidence.beyond: crosstalk of channel 1 into channel 4 left in the
+    extended residual stays significant; once the candidate's own columns can
+    do the same (a gain on channel 4 of a signal correlated with channel 1),
+    it no longer counts; a clock fit on the bound of its search never counts."""
+    rng = np.random.default_rng(5)
+    src = 300.0 * np.sin(2 * np.pi * 3.0 * T) + 40.0 * rng.standard_normal(N)
+    dep_col = _col(4, src - src.mean())
+    noise = rng.standard_normal((N, K)) * SIG
+    r_ext = noise + 0.03 * dep_col
+    lr0 = E.lr_test(1.0, 1.0, [dep_col], noise, W, 1, 42, 42)
+    dep = E.Departure("crosstalk", "1 into 4", dataclasses.replace(lr0, p_adj=0.0, dbic=50.0), {}, [dep_col])
+    t = E.beyond(dep, r_ext, W)
+    assert t.significant and t.dbic > 0, t
+    assert not E.beyond(dep, noise, W).significant
+    similar = _col(4, 300.0 * np.sin(2 * np.pi * 3.0 * T + 0.05))   # the candidate's gain column
+    t2 = E.beyond(dep, r_ext, W, J=[similar])
+    assert t2.dS < 0.2 * t.dS, (t.dS, t2.dS)
+    assert dep.counts
+    clock = E.Departure("clock", "at the bound", dep.test, {"eps": E.CLOCK_MAX, "at_bound": True}, [dep_col])
+    assert not clock.counts
