@@ -94,29 +94,19 @@ static int motor_from_hint(const ChainModel *m, double s_plate, int *hint) {
     return lo;
 }
 
-/* The motors' thrust limit, smooth: F = F_max s(u / F_max) with
- * s(x) = x / (1 + x^8)^(1/8), linear to within 0.1 % up to half the limit,
- * 0.917 F_max at u = F_max and the limit beyond (a linear motor's thrust does
- * not break off at a corner). The integrator stops as far as the thrust is
- * limited and the error would drive it further (anti-windup), smoothly too.
- * A hard clip with conditional integration made the right-hand side jump
- * wherever the command crossed the limit: with the chain's axial waves in
- * the speed, a saturated start chattered across it and the solver took a
- * hundred times more steps (and rejected a quarter of them). */
-#define WINDUP_SCALE 1.0   /* N m/s: e u below this is "no push" */
-
 double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot) {
     double e = st->v_ref - v_mean;
     double u = st->Kp * e + st->Ki * z;
-    if (!(m->F_max > 0)) {
-        *zdot = e;
-        return 0.0;
+    double F = u;
+    *zdot = e;
+    if (u > m->F_max) {
+        F = m->F_max;
+        if (e > 0) *zdot = 0.0;  /* conditional integration: no wind-up */
+    } else if (u < -m->F_max) {
+        F = -m->F_max;
+        if (e < 0) *zdot = 0.0;
     }
-    double x = u / m->F_max, x2 = x * x, x8 = x2 * x2 * x2 * x2;
-    double r = 1.0 / sqrt(sqrt(sqrt(1.0 + x8)));   /* F / u */
-    double push = 0.5 * (1.0 + tanh(e * u / WINDUP_SCALE));
-    *zdot = e * (1.0 - (1.0 - r) * push);
-    return u * r;
+    return F;
 }
 
 int drive_thrust(const ChainModel *m, double s_axle, int *hint, double F_cmd, double *F) {
