@@ -294,7 +294,7 @@ def _local(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optiona
 
     from .refine import refine
     from .uncertainty import Interval, intervals
-    if problem.objective != "pointwise" and (refine_evals > 0 or uncertainty):
+    if getattr(problem, "objective", "pointwise") != "pointwise" and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
         log.warning("%s: no refinement and no intervals with the %s objective", problem.name, problem.objective)
         return {}
