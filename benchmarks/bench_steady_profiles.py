@@ -119,10 +119,8 @@ def draw(entry: dict, path: Path, title: str) -> None:
     axes[0][0].legend(fontsize=7)
     fig.suptitle(f"{title}: objective along each CoR, steady running, the rest at the truth")
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    for ext in ("png", "svg"):
-        fig.savefig(path.with_suffix("." + ext), dpi=100)
-    plt.close(fig)
+    from lss_app.figures.save import save_figure
+    save_figure(fig, path)
 
 
 if __name__ == "__main__":

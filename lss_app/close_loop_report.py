@@ -25,6 +25,7 @@ from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
 from lss_fmu.design import LABELS  # noqa: E402
 
 from .figures.identification import forces_overlay, nrmsd_bars  # noqa: E402
+from .figures.save import save_figure  # noqa: E402
 
 
 def ranking_figure(rnd, path: Path, threshold: float = None) -> Path:
@@ -44,10 +45,7 @@ def ranking_figure(rnd, path: Path, threshold: float = None) -> Path:
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(alpha=0.3, axis="x")
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(path.with_suffix("." + ext), dpi=100)
-    plt.close(fig)
-    return path.with_suffix(".png")
+    return save_figure(fig, path)
 
 
 def write_report(res, out: Path) -> Path:

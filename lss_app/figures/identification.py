@@ -13,6 +13,7 @@ import numpy as np  # noqa: E402
 
 from lss_fmu.design import LABELS  # noqa: E402
 from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
+from .save import save_figure  # noqa: E402
 
 
 def forces_overlay(times, measured, initial, optimum, path: Path, title: str,
@@ -30,10 +31,7 @@ def forces_overlay(times, measured, initial, optimum, path: Path, title: str,
     axes[-1].set_xlabel("time after the trigger, s")
     fig.suptitle(title)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(Path(path).with_suffix("." + ext), dpi=100)
-    plt.close(fig)
-    return Path(path).with_suffix(".png")
+    return save_figure(fig, path)
 
 
 def history(f_per_eval, path: Path, title: str, series: dict | None = None) -> Path:
@@ -55,10 +53,7 @@ def history(f_per_eval, path: Path, title: str, series: dict | None = None) -> P
     ax.legend(fontsize=8)
     ax.set_title(title)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(Path(path).with_suffix("." + ext), dpi=100)
-    plt.close(fig)
-    return Path(path).with_suffix(".png")
+    return save_figure(fig, path)
 
 
 def nrmsd_bars(H0, H, path: Path, title: str, labels: tuple = ("initial", "final")) -> Path:
@@ -72,7 +67,4 @@ def nrmsd_bars(H0, H, path: Path, title: str, labels: tuple = ("initial", "final
     ax.grid(alpha=0.3, axis="y")
     ax.set_title(title)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(Path(path).with_suffix("." + ext), dpi=100)
-    plt.close(fig)
-    return Path(path).with_suffix(".png")
+    return save_figure(fig, path)

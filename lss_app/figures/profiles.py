@@ -9,6 +9,7 @@ import numpy as np
 
 from identification.profile import Profile
 from lss_fmu.design import symbol
+from .save import save_figure
 
 
 def plot_profiles(profiles: list[Profile], floor: Optional[np.ndarray], path: Path, title: str,
@@ -30,7 +31,4 @@ def plot_profiles(profiles: list[Profile], floor: Optional[np.ndarray], path: Pa
     axes[0][0].legend(fontsize=7)
     fig.suptitle(title)
     fig.tight_layout()
-    for ext in ("png", "svg"):
-        fig.savefig(Path(path).with_suffix("." + ext), dpi=100)
-    plt.close(fig)
-    return Path(path).with_suffix(".png")
+    return save_figure(fig, path)
