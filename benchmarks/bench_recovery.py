@@ -33,14 +33,13 @@ from identification.problem import from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
-from lss_fmu.rig import generate_set, load_truth, parse_numbers  # noqa: E402
+from lss_fmu.rig import generate_set, load_truth, parse_numbers, true_design_values  # noqa: E402
 
 TARGET = {"e_JA": 0.03, "e_SW": 0.03, "e_RW": 0.03, "e_JR": 0.05}
 
 
 def _truth_x(truth: dict, free) -> np.ndarray:
-    vals = {**{f"contact.{k}": v for k, v in truth["cor"].items()},
-            **{n: truth["design_variables"][SYMBOL[n]] for n in DESIGN[4:]}}
+    vals = true_design_values(truth)
     return np.array([vals[n] for n in free])
 
 
@@ -120,7 +119,7 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
             m = load_measurement(data / f"m{n:02d}")
             p = from_measurement(m, "LW", window=args.window, tare=tare)
             truth = load_truth(m)
-            known = {d: truth["design_variables"][SYMBOL[d]] for d in DESIGN[4:]}
+            known = {d: v for d, v in true_design_values(truth).items() if d in DESIGN[4:]}
             p = dataclasses.replace(p, free=tuple(CORS), x0={**p.x0, **known})
             c0 = time.process_time()
             try:

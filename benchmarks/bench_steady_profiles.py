@@ -29,9 +29,9 @@ import numpy as np  # noqa: E402
 from identification.features import stat_errors  # noqa: E402
 from identification.problem import from_measurement, nrmsd  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
-from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
+from lss_fmu.design import CORS, SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
-from lss_fmu.rig import generate_set, load_truth, parse_numbers  # noqa: E402
+from lss_fmu.rig import generate_set, load_truth, parse_numbers, true_design_values  # noqa: E402
 
 
 def evaluate(p, x) -> tuple:
@@ -58,8 +58,7 @@ def main(argv=None) -> int:
         m = load_measurement(data / f"m{n:02d}")
         truth = load_truth(m)
         p = from_measurement(m, "LW", tare=True)
-        vals = {**{f"contact.{k}": v for k, v in truth["cor"].items()},
-                **{d: truth["design_variables"][SYMBOL[d]] for d in DESIGN[4:]}}
+        vals = true_design_values(truth)
         xt = np.array([vals[d] for d in p.free])
         c0 = time.process_time()
         f_pt, f_st = evaluate(p, xt)

@@ -20,9 +20,9 @@ REFINE = 60             # then Levenberg-Marquardt simulations
 
 
 def run_stages(out: Path) -> list[str]:
-    from lss_fmu.design import DESIGN, SYMBOL, symbol
+    from lss_fmu.design import symbol
     from lss_fmu.measurement import load_measurement
-    from lss_fmu.rig import folder_name, load_truth, run_measurement
+    from lss_fmu.rig import folder_name, load_truth, run_measurement, true_design_values
     from lss_fmu.runner import ChainSimulator
 
     from identification.identify import identify
@@ -57,8 +57,7 @@ def run_stages(out: Path) -> list[str]:
     history(res.history_f, work / "history", f"{meas.id}, LW")
     nrmsd_bars(res.H0, res.H, work / "nrmsd", f"{meas.id}, LW")
 
-    true = {**{f"contact.{k}": v for k, v in truth["cor"].items()},
-            **{d: truth["design_variables"][SYMBOL[d]] for d in DESIGN[4:]}}
+    true = true_design_values(truth)
     f_truth = problem([true[k] for k in problem.free])
     ivs = {iv.name: iv for iv in (res.intervals or [])}
     rows = ["| variable | true | start | identified | 95 % interval |", "|---|---|---|---|---|"]

@@ -481,6 +481,14 @@ def load_truth(meas: Union[str, Path, "M.Measurement"]) -> dict:
     return json.loads(f.read_text())
 
 
+def true_design_values(truth: Mapping) -> dict:
+    """The paper's ten design variables of an answer file (load_truth), by
+    their FMU names: the CoRs and the layout-dependent values the rig drew."""
+    from .design import DESIGN, SYMBOL
+    return {**{f"contact.{k}": float(v) for k, v in truth["cor"].items()},
+            **{d: float(truth["design_variables"][SYMBOL[d]]) for d in DESIGN[4:]}}
+
+
 def sha256(path: Union[str, Path]) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:

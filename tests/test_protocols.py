@@ -10,9 +10,8 @@ import pytest
 
 from identification.problem import from_measurement
 from lss_fmu import measurement as M
-from lss_fmu.design import DESIGN, SYMBOL
 from lss_fmu.protocol import Protocol, from_meta
-from lss_fmu.rig import load_truth, run_measurement
+from lss_fmu.rig import load_truth, run_measurement, true_design_values
 from test_measurement import make_meta, make_samples
 
 
@@ -87,8 +86,7 @@ def test_the_problem_follows_the_record(start_up):
     p = from_measurement(start_up, "LW", tare=True)
     assert p.protocol.from_rest and p.tolerance == 1e-6
     t = load_truth(start_up)
-    vals = {**{f"contact.{k}": v for k, v in t["cor"].items()},
-            **{n: t["design_variables"][SYMBOL[n]] for n in DESIGN[4:]}}
+    vals = true_design_values(t)
     xt = np.array([vals[n] for n in p.free])
     f_truth, f_start = p(xt), p(p.x0_vector())
     # at the truth only the sensor is left (noise, offsets beyond the tare): the

@@ -18,8 +18,8 @@ import pytest
 from identification.identify import identify
 from identification.problem import from_measurement
 from lss_fmu import measurement as M
-from lss_fmu.design import CORS, DESIGN, SYMBOL
-from lss_fmu.rig import load_truth, run_measurement
+from lss_fmu.design import CORS, DESIGN
+from lss_fmu.rig import load_truth, run_measurement, true_design_values
 
 WINDOW = 1.5   # s: long enough for the first wave through the chain, short for a test
 
@@ -34,9 +34,7 @@ def record(request, tmp_path_factory, fmu_file):
 
 
 def truth_values(meas) -> dict:
-    t = load_truth(meas)
-    return {**{f"contact.{k}": v for k, v in t["cor"].items()},
-            **{n: t["design_variables"][SYMBOL[n]] for n in DESIGN[4:]}}
+    return true_design_values(load_truth(meas))
 
 
 def test_a_start_up_identification_reaches_the_noise_floor_with_intervals(record):
