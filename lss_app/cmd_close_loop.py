@@ -5,7 +5,7 @@ report (identification.close_loop; docs/close_loop.md).
                    [--window S] [--rounds 2] [--effects a,b] [--seed S] [--noise declared|estimate]
 
 The record's metadata says what to simulate: its protocol (steady, start-up,
-speed step, stop: from the chain at rest, or the photocell armed after the
+speed step, stop, start-stop: from the chain at rest, or the photocell armed after the
 protocol's run-in), layout, transducer cart and sensor (the declared noise
 and zero tolerance).
 """

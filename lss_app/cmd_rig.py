@@ -47,7 +47,7 @@ def register(sub, common) -> None:
     ap.add_argument("--protocol", default="steady", choices=rig.PROTOCOLS,
                     help="what the sorter does while the cart logs (docs/measurements.md): steady running from "
                          "the photocell for a lap (default), a start-up from standstill at full thrust, a speed "
-                         "step, a stop")
+                         "step, a stop, a start-stop (a start braked after 1 s)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.set_defaults(run=run)
 

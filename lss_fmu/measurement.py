@@ -95,7 +95,7 @@ OPTIONAL_META = {
     "Ki_nominal": ("number", "N/m per motor"),
     "design_variables": ("dict", "nominal value and bounds of v_s, d, mu_d, s_M, K_P, K_I"),
     "sensor": ("dict", "sensor and logger description"),
-    "protocol": ("protocol", "what the sorter did: steady, start-up, speed-step or stop (lss_fmu.protocol)"),
+    "protocol": ("protocol", "what the sorter did: steady, start-up, speed-step, stop or start-stop (lss_fmu.protocol)"),
 }
 WHEEL_TYPES, COUPLING_TYPES = ("A", "B", "C"), ("A", "B")
 

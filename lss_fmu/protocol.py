@@ -19,6 +19,13 @@ before the first sample follows from the protocol, not from a constant.
     stop        running at v_s; logging from the photocell; `step_time` s
                 after the trigger the set point goes to 0 in `ramp_time` s
                 (0: at once, the drive brakes at full thrust)
+    start-stop  a start-up braked again before the chain runs steadily: from
+                rest, the set point ramps to v_s at t = 0 and back to 0 at
+                `step_time`, both in `ramp_time` s. The whole record stays
+                a transient from a known state (never the chaotic steady
+                running), and the braking loads the joints and wheels a
+                second time: it holds more about the CoRs than a start-up
+                of the same length (docs/identification.md, information)
 
 Speeds are set points. The design variable v_s is the set point the record
 reaches (`speed_nominal` is its nominal value); a speed-step's `v_from`
@@ -32,7 +39,9 @@ from typing import Callable, Mapping, Optional
 
 from .variables import BY_NAME
 
-NAMES = ("steady", "start-up", "speed-step", "stop")
+NAMES = ("steady", "start-up", "speed-step", "stop", "start-stop")
+FROM_REST = ("start-up", "start-stop")
+WITH_STEP = ("speed-step", "stop", "start-stop")
 RUN_IN = 4.0                 # s: steady running before the photocell is armed (the rig's default)
 V_MAX = float(BY_NAME["drive.v_ref"].max)   # the drive's set-point range, m/s
 TRANSIENT_TOLERANCE = 1e-6   # solver tolerance for transient records: below it the solver's
@@ -59,7 +68,7 @@ class Protocol:
     @property
     def from_rest(self) -> bool:
         """The record starts with the chain at rest (no photocell: t = 0 is the start command)."""
-        return self.name == "start-up"
+        return self.name in FROM_REST
 
     @property
     def transient(self) -> bool:
@@ -67,7 +76,7 @@ class Protocol:
 
     def v_before(self, v_s: float, v_nominal: float) -> float:
         """The set point before the record starts."""
-        if self.name == "start-up":
+        if self.from_rest:
             return 0.0
         if self.name == "speed-step":
             return float(self.v_from) * v_s / v_nominal
@@ -80,6 +89,10 @@ class Protocol:
             return lambda t: v_s
         if self.name == "start-up":
             return _ramp(0.0, v_s, 0.0, ramp)
+        if self.name == "start-stop":
+            up, down, t_stop = _ramp(0.0, v_s, 0.0, ramp), _ramp(v_s, 0.0, float(self.step_time), ramp), \
+                float(self.step_time)
+            return lambda t: up(t) if t < t_stop else down(t)
         target = v_s if self.name == "speed-step" else 0.0
         return _ramp(v0, target, float(self.step_time), ramp)
 
@@ -95,7 +108,8 @@ class Protocol:
         """The fields that mean something for this protocol, for meta.json."""
         keep = {"steady": ("name", "run_in"), "start-up": ("name", "ramp_time"),
                 "speed-step": ("name", "v_from", "step_time", "ramp_time", "run_in"),
-                "stop": ("name", "step_time", "ramp_time", "run_in")}.get(self.name, tuple(asdict(self)))
+                "stop": ("name", "step_time", "ramp_time", "run_in"),
+                "start-stop": ("name", "step_time", "ramp_time")}.get(self.name, tuple(asdict(self)))
         return {k: v for k, v in asdict(self).items() if k in keep and v is not None}
 
     def check(self, speed_nominal: float, duration: Optional[float] = None) -> "Protocol":
@@ -106,7 +120,7 @@ class Protocol:
         _finite_nonneg("run_in", self.run_in)
         if not 0.0 < speed_nominal <= V_MAX:
             raise ProtocolError("", f"speed_nominal {speed_nominal!r} m/s is beyond the drive's range (0, {V_MAX:g}]")
-        if self.name in ("speed-step", "stop"):
+        if self.name in WITH_STEP:
             if self.step_time is None:
                 raise ProtocolError("step_time", f"a {self.name} needs the time of the change after the trigger, s")
             _finite_nonneg("step_time", self.step_time)
@@ -123,7 +137,7 @@ class Protocol:
                 raise ProtocolError("v_from", f"{self.v_from!r} m/s is beyond the drive's range (0, {V_MAX:g}]")
         elif self.v_from is not None:
             raise ProtocolError("v_from", f"only a speed-step starts from another set point")
-        if self.name == "start-up" and duration is not None and self.ramp_time > duration:
+        if self.from_rest and duration is not None and self.ramp_time > duration:
             raise ProtocolError("ramp_time", f"{self.ramp_time!r} s is longer than the record ({duration:.3f} s)")
         if self.name == "stop" and duration is not None and self.step_time + self.ramp_time > 10 * duration:
             raise ProtocolError("ramp_time", f"{self.ramp_time!r} s: the stop would end far outside the record")

@@ -122,7 +122,8 @@ def rig_protocol(name: str, v_nominal: float) -> Protocol:
     """How the virtual test engineer runs each protocol: a start at full thrust
     (the set point steps from 0 to v_s), a speed step from 3/4 of the nominal
     set point and a stop with the set point dropped to 0 (the drive brakes),
-    both 1 s after the photocell."""
+    both 1 s after the photocell, and a start-stop: the start, braked 1 s
+    after the start command."""
     if name == "steady":
         return Protocol("steady", run_in=SETTLE_TIME)
     if name == "start-up":
@@ -131,6 +132,8 @@ def rig_protocol(name: str, v_nominal: float) -> Protocol:
         return Protocol("speed-step", step_time=1.0, v_from=round(0.75 * v_nominal, 3), run_in=SETTLE_TIME)
     if name == "stop":
         return Protocol("stop", step_time=1.0, run_in=SETTLE_TIME)
+    if name == "start-stop":
+        return Protocol("start-stop", step_time=1.0, ramp_time=0.0)
     raise ValueError(f"unknown protocol {name!r} (known: {', '.join(PROTOCOLS)})")
 
 
@@ -419,6 +422,10 @@ def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) ->
 
 def _logging_note(case: Case, n_samples: int, full_lap: bool) -> str:
     p = case.protocol
+    if p.name == "start-stop":
+        return (f"Start-stop from standstill, the transducer cart parked at the trigger point; the set point "
+                f"steps to {case.speed_nominal:g} m/s at the start command, which starts logging, and back to 0 "
+                f"{p.step_time:g} s later (the drive brakes; {n_samples} samples).")
     if p.from_rest:
         return (f"Start-up from standstill, the transducer cart parked at the trigger point; the set point "
                 f"steps to {case.speed_nominal:g} m/s at the start command, which starts logging "
@@ -676,7 +683,7 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
                  log=print, effects: Sequence[str] = (), effect_seed: Optional[int] = None,
                  artefacts: Sequence[str] = (), protocol: str = "steady") -> list:
     """Generate measurements of a set into `out`, in parallel, measured with
-    `protocol` (rig_protocol: steady, start-up, speed-step, stop).
+    `protocol` (rig_protocol: steady, start-up, speed-step, stop, start-stop).
 
     Measurements already in `out` that this run would make identically (same
     set, seed, FMU and parameters, full lap) are kept, so an interrupted run

@@ -27,6 +27,13 @@ def test_schedules():
     stop = Protocol("stop", step_time=0.5, ramp_time=1.0).schedule(2.0, 2.0)
     assert [stop(t) for t in (0.0, 0.5, 1.0, 1.5, 9.0)] == [2.0, 2.0, 1.0, 0.0, 0.0]
     assert Protocol().schedule(2.5, 2.0)(7.0) == 2.5 and not Protocol().transient
+    ss = Protocol("start-stop", step_time=1.0, ramp_time=0.5)
+    f = ss.schedule(2.0, 2.0)
+    assert [f(t) for t in (0.0, 0.25, 0.5, 0.9, 1.0, 1.25, 1.5, 4.0)] == [0.0, 1.0, 2.0, 2.0, 2.0, 1.0, 0.0, 0.0]
+    assert ss.from_rest and ss.transient and ss.v_before(2.0, 2.0) == 0.0
+    assert ss.to_meta() == {"name": "start-stop", "step_time": 1.0, "ramp_time": 0.5}
+    brake = Protocol("start-stop", step_time=0.8).schedule(1.5, 2.0)
+    assert (brake(0.0), brake(0.79), brake(0.8)) == (1.5, 1.5, 0.0)   # ramps 0: full thrust, then full braking
 
 
 # --- bad input --------------------------------------------------------------------------
@@ -40,6 +47,10 @@ BAD = [
     ({"name": "speed-step", "step_time": 0.5}, "protocol.v_from", "None"),
     ({"name": "steady", "step_time": 1.0}, "protocol.step_time", "no step"),
     ({"name": "start-up", "tempo": 1}, "protocol.tempo", "unknown"),
+    ({"name": "start-stop"}, "protocol.step_time", "needs"),
+    ({"name": "start-stop", "step_time": -0.5}, "protocol.step_time", "-0.5"),
+    ({"name": "start-stop", "step_time": 40.0}, "protocol.step_time", "outside the record"),
+    ({"name": "start-stop", "step_time": 0.5, "ramp_time": 99.0}, "protocol.ramp_time", "longer than the record"),
     (["start-up"], "protocol", "object"),
 ]
 
@@ -94,3 +105,33 @@ def test_the_problem_follows_the_record(start_up):
     assert f_truth < 0.2 * f_start, (f_truth, f_start)
     H = p.channel_errors(xt)
     assert H[0] < 0.03, H      # the joint's axial force, the largest span, at the sensor's noise
+
+
+def test_a_start_stop_is_simulated_as_the_rig_measured_it(tmp_path, fmu_file):
+    """The rig's start-stop (a start at full thrust, braked 1 s later): the
+    chain from rest, the set point back to 0; the problem, reading only the
+    record, reproduces it to the sensor's noise at the truth."""
+    from lss_fmu.runner import ChainSimulator
+    with ChainSimulator() as sim:
+        run_measurement("recovery", 19, tmp_path, sim, protocol="start-stop", lap_seconds=2.0)
+    rec = M.load_measurement(tmp_path / "m19")
+    assert rec.meta["protocol"] == {"name": "start-stop", "step_time": 1.0, "ramp_time": 0.0}
+    assert "Start-stop from standstill" in rec.meta["notes"]
+    v = rec.speeds.to_numpy()
+    t = rec.time
+    assert np.all(np.abs(v[0]) < 1e-9)
+    moving = np.abs(v).max(axis=1)
+    assert moving[(t > 0.9) & (t < 1.0)].min() > 0.3 and moving[-1] < moving[(t > 0.9) & (t < 1.0)].min()  # braked
+    p = from_measurement(rec, "LW", tare=True)
+    assert p.protocol == rec.protocol and p.protocol.from_rest
+    vals = true_design_values(load_truth(rec))
+    xt = np.array([vals[n] for n in p.free])
+    H = p.channel_errors(xt)
+    assert H[0] < 0.03, H
+    off = xt.copy()
+    off[list(p.free).index("contact.e_JA")] += 0.1      # a CoR off by 0.1 shows far above the noise
+    from lss_fmu.sensor import NOISE_STD
+    from lss_fmu.variables import FORCE_CHANNELS
+    sigma = np.array([NOISE_STD[c] for c in FORCE_CHANNELS])
+    d_chi2 = np.sum(((p.samples - p.simulate(off)) ** 2 - (p.samples - p.simulate(xt)) ** 2) / sigma ** 2)
+    assert d_chi2 > 100.0 and p(off) > p(xt), (d_chi2, p(off), p(xt))

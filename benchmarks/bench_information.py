@@ -1,0 +1,128 @@
+#!/usr/bin/env python3
+"""What a record can tell about the CoRs at all: the Cramér-Rao bound (issue 17).
+
+For a recovery measurement written by the rig with a given protocol, the
+simulated forces are linearised at the TRUE design values, J = d sim / d x
+by central differences through the FMU, and weighted by the sensor's
+declared white noise (lss_fmu.sensor.NOISE_STD). The covariance
+(J' W J)^-1 is the smallest any unbiased estimator can reach from that
+record: if its standard deviation of a CoR is not well below 0.01, no
+optimiser will find that CoR within 0.03, whatever its budget. Reported
+per protocol and layout, with the ten design variables free and with the
+four CoRs alone (drive, pretension, trigger known), together with how
+smooth the record is in each variable (forward against backward
+difference: a chaotic record has no meaningful derivative).
+
+    .venv/bin/python benchmarks/bench_information.py --protocols start-up,start-stop \\
+        --measurements 1-22 --window 2.5 --json benchmarks/results/information.json
+
+Each case is written to the JSON as it finishes (atomically); a rerun skips
+the cases already there.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from identification.problem import from_measurement  # noqa: E402
+from lss_fmu.atomic import write_json_atomic  # noqa: E402
+from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
+from lss_fmu.measurement import load_measurement  # noqa: E402
+from lss_fmu.rig import load_truth, parse_numbers, run_measurement, true_design_values  # noqa: E402
+from lss_fmu.runner import ChainSimulator  # noqa: E402
+from lss_fmu.sensor import NOISE_STD  # noqa: E402
+from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
+
+STEP = 0.01      # difference step, of each variable's bound range
+ROUGH = 0.5      # |forward - backward| / |central| (in the noise metric) beyond which a variable is not smooth
+
+
+def information(p, x: np.ndarray, sigma: np.ndarray):
+    """J (noise-weighted, flattened), and per variable the roughness of the record in it."""
+    lo, hi = np.array(p.bounds_array, float).T
+    base = p.simulate(x) / sigma
+    cols, rough = [], []
+    for k in range(len(x)):
+        h = STEP * (hi[k] - lo[k])
+        xp, xm = x.copy(), x.copy()
+        xp[k] = min(x[k] + h, hi[k])
+        xm[k] = max(x[k] - h, lo[k])
+        fp = p.simulate(xp) / sigma if xp[k] > x[k] else None    # one-sided at a bound
+        fm = p.simulate(xm) / sigma if xm[k] < x[k] else None
+        dp = None if fp is None else (fp - base) / (xp[k] - x[k])
+        dm = None if fm is None else (base - fm) / (x[k] - xm[k])
+        central = dm if dp is None else dp if dm is None else 0.5 * (dp + dm)
+        rough.append(float("nan") if dp is None or dm is None else
+                     float(np.linalg.norm(dp - dm) / max(np.linalg.norm(central), 1e-30)))
+        cols.append(central.ravel())
+    return np.array(cols).T, np.array(rough)
+
+
+def bound_sd(J: np.ndarray, idx) -> np.ndarray:
+    """Standard deviations of the variables `idx` with only those free."""
+    Jk = J[:, idx]
+    cov = np.linalg.pinv(Jk.T @ Jk)
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def case(protocol: str, number: int, window: float, work: Path, sim) -> dict:
+    data = work / f"{protocol}_{window:g}s"
+    folder = data / f"m{number:02d}"
+    if not folder.exists():
+        run_measurement("recovery", number, data, sim, protocol=protocol, lap_seconds=window + 0.2)
+    meas = load_measurement(folder)
+    truth = true_design_values(load_truth(meas))
+    p = from_measurement(meas, "LW", window=window, tare=True)
+    x = np.array([truth[n] for n in p.free])
+    sigma = np.array([NOISE_STD[c] for c in FORCE_CHANNELS])
+    c0 = time.process_time()
+    try:
+        J, rough = information(p, x, sigma)
+    finally:
+        p.sim.close()
+    free = list(p.free)
+    cors = [free.index(n) for n in CORS]
+    sd_all = bound_sd(J, list(range(len(free))))
+    sd_cors = bound_sd(J, cors)
+    return {"protocol": protocol, "measurement": number, "layout": meas.meta.get("layout"),
+            "window_s": window, "protocol_meta": p.protocol.to_meta(), "n_samples": int(len(p.times)),
+            "sd_ten_free": {SYMBOL[n]: float(sd_all[free.index(n)]) for n in free},
+            "sd_cors_only": {SYMBOL[n]: float(s) for n, s in zip(CORS, sd_cors)},
+            "roughness": {SYMBOL[n]: float(r) for n, r in zip(free, rough)},
+            "cpu_s": time.process_time() - c0}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--protocols", default="start-up,speed-step,stop,steady")
+    ap.add_argument("--measurements", default="1,5,9,12,13,19,20")
+    ap.add_argument("--window", type=float, default=2.5)
+    ap.add_argument("--work", type=Path, default=Path("build/bench_information"))
+    ap.add_argument("--json", type=Path, default=Path("benchmarks/results/information.json"))
+    a = ap.parse_args(argv)
+    done = json.loads(a.json.read_text()) if a.json.exists() else {"cases": []}
+    have = {(c["protocol"], c["measurement"], c["window_s"]) for c in done["cases"]}
+    with ChainSimulator() as sim:
+        for proto in a.protocols.split(","):
+            for m in parse_numbers(a.measurements):
+                if (proto, m, a.window) in have:
+                    continue
+                r = case(proto, m, a.window, a.work, sim)
+                done["cases"].append(r)
+                write_json_atomic(a.json, done)
+                cors = "  ".join(f"{k} {r['sd_ten_free'][k]:.4f}/{r['sd_cors_only'][k]:.4f}"
+                                 f"{'~' if not r['roughness'][k] <= ROUGH else ''}" for k in r["sd_cors_only"])
+                print(f"{proto:10s} m{m:02d} layout {r['layout']}: sd ten free / CoRs only: {cors}"
+                      f"  ({r['cpu_s']:.0f} CPU-s)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
