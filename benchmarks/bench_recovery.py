@@ -43,24 +43,24 @@ def _truth_x(truth: dict, free) -> np.ndarray:
     return np.array([vals[n] for n in free])
 
 
-def f_truth(meas_dir: Path, window, tare: bool) -> float:
+def f_truth(meas_dir: Path, window, tare: bool, objective: str = "pointwise") -> float:
     """The objective at the true values (the floor the identification can reach)."""
     m = load_measurement(meas_dir)
-    p = from_measurement(m, "LW", window=window, tare=tare)
+    p = from_measurement(m, "LW", window=window, tare=tare, objective=objective)
     try:
         return float(p(_truth_x(load_truth(m), p.free)))
     finally:
         p.sim.close()
 
 
-def rows_of(results: list, data: Path, window, tare: bool, cache: dict) -> list:
+def rows_of(results: list, data: Path, window, tare: bool, cache: dict, objective: str = "pointwise") -> list:
     rows = []
     for r in results:
         meas_dir = Path(r["measurement_dir"])
         truth = load_truth(meas_dir)
         key = r["measurement"]
         if key not in cache:
-            cache[key] = f_truth(meas_dir, window, tare)
+            cache[key] = f_truth(meas_dir, window, tare, objective)
         row = {"measurement": key, "number": r.get("number"), "layout": r.get("layout"), "f": r["f"],
                "f_truth": cache[key], "ratio": r["f"] / cache[key] if cache[key] > 0 else float("nan"),
                "cpu_s": r.get("cpu_s"), "nfev": r["nfev"], "refined": r.get("refined"),
@@ -117,7 +117,7 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
         path = out / f"m{n:02d}.json"
         if not path.exists():
             m = load_measurement(data / f"m{n:02d}")
-            p = from_measurement(m, "LW", window=args.window, tare=tare)
+            p = from_measurement(m, "LW", window=args.window, tare=tare, objective=args.objective)
             truth = load_truth(m)
             known = {d: v for d, v in true_design_values(truth).items() if d in DESIGN[4:]}
             p = dataclasses.replace(p, free=tuple(CORS), x0={**p.x0, **known})
@@ -151,6 +151,8 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "likelihood"),
+                    help="the identification's objective (identification.problem)")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     args = ap.parse_args(argv)
@@ -162,33 +164,36 @@ def main(argv=None) -> int:
                   "settings": report["settings"]}
     for protocol in [p.strip() for p in args.protocols.split(",") if p.strip()]:
         base = Path(args.work) / protocol
+        label = protocol if args.objective == "pointwise" else f"{protocol}, {args.objective}"
+        runs = base if args.objective == "pointwise" else base / args.objective   # the set is shared
         data, out = base / "data", base / "campaign"
         t0, c0 = time.time(), time.process_time()
         gen = generate_set("recovery", data, numbers, workers=args.workers, protocol=protocol, progress=True,
                            log=lambda msg: print(msg, file=sys.stderr))
         gen_cpu = sum(r.get("cpu_s", 0.0) for r in gen if "cpu_s" in r)
         if args.cors_only:
-            results = cors_only(data, base / "cors_only", numbers, args, tare)
+            results = cors_only(data, runs / "cors_only", numbers, args, tare)
             cache = {r["measurement"]: r["f_truth"] for r in results}
-            rows = rows_of(results, data, args.window, tare, cache)
+            rows = rows_of(results, data, args.window, tare, cache, args.objective)
             entry = {"rows": rows, "summary": summary(rows), "wall_s": time.time() - t0}
-            report["protocols"][protocol + " (CoRs only)"] = entry
-            print(f"\n## {protocol}, CoRs only\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
+            report["protocols"][label + " (CoRs only)"] = entry
+            print(f"\n## {label}, CoRs only\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
             if args.json:
                 write_json_atomic(args.json, report)
             continue
         # the campaign takes every measurement in the set's folder: the ones generated (--measurements)
+        out = runs / "campaign"
         results = run_campaign(data, ["LW"], out, workers=args.workers, max_evals=args.max_evals, seed=args.seed,
                                window=args.window, tare=tare, presolve=args.presolve,
                                refine_evals=args.refine_evals, restarts=args.restarts, uncertainty=True,
-                               progress=True)
-        cache = (report["protocols"].get(protocol) or {}).get("f_truth", {})
+                               progress=True, objective=args.objective)
+        cache = (report["protocols"].get(label) or {}).get("f_truth", {})
         results = [r for r in results if r.get("number") in numbers]
-        rows = rows_of(results, data, args.window, tare, cache)
+        rows = rows_of(results, data, args.window, tare, cache, args.objective)
         entry = {"rows": rows, "summary": summary(rows), "f_truth": cache, "wall_s": time.time() - t0,
                  "cpu_s_this_session": time.process_time() - c0, "generation_cpu_s": gen_cpu}
-        report["protocols"][protocol] = entry
-        print(f"\n## {protocol}\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
+        report["protocols"][label] = entry
+        print(f"\n## {label}\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
         if args.json:
             write_json_atomic(args.json, report)
     return 0

@@ -40,7 +40,9 @@ def simulate_with(problem: IdentificationProblem, x, extra: Optional[dict] = Non
 
 
 def weights(problem: IdentificationProblem) -> np.ndarray:
-    """Per channel: f = sum_j w_j sum_t r_tj^2 (Eq. 10-12)."""
+    """Per channel: f = sum_j w_j sum_t r_tj^2 (Eq. 10-12, or the likelihood's 1 / (n sigma_j^2))."""
+    if getattr(problem, "objective", "pointwise") == "likelihood":
+        return 1.0 / (len(problem.times) * problem.noise ** 2)
     span = problem.samples.max(axis=0) - problem.samples.min(axis=0)
     span = np.where(span > 0, span, 1.0)
     return 1.0 / (len(problem.times) * span ** 2)

@@ -31,7 +31,7 @@ from lss_fmu.design import symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
 from .optim_result import ComplexResult, jsonable
-from .problem import IdentificationProblem
+from .problem import LINEARISABLE, IdentificationProblem
 
 
 log = logging.getLogger(__name__)
@@ -294,7 +294,7 @@ def _local(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optiona
 
     from .refine import refine
     from .uncertainty import Interval, intervals
-    if getattr(problem, "objective", "pointwise") != "pointwise" and (refine_evals > 0 or uncertainty):
+    if getattr(problem, "objective", "pointwise") not in LINEARISABLE and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
         log.warning("%s: no refinement and no intervals with the %s objective", problem.name, problem.objective)
         return {}

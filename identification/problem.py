@@ -2,7 +2,11 @@
 
 Design vector x = [e_JA, e_JR, e_SW, e_RW, v_s, d, mu_d, s_M, K_P, K_I];
 objective f(x) = sum_j H_j^2 over the 7 forces, H_j = RMSD_j / (max - min of
-the measured force j); the design vector itself is lss_fmu.design's. Each
+the measured force j); the design vector itself is lss_fmu.design's. With
+objective "likelihood" H_j = RMSD_j / sigma_j instead, sigma_j the sensor's
+declared white noise: f is then the mean chi^2 per sample, about 7 at the
+truth, and every channel counts by what it tells rather than by its span
+(docs/identification.md, "what a record can tell"). Each
 evaluation simulates the chain through the FMU (the problem's simulator: one
 instance per process, reused with fmi2Reset), aligned on the trigger point
 s_M as the transducer cart logs. A failed or diverging
@@ -25,7 +29,8 @@ from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS
 
 log = logging.getLogger(__name__)
 
-OBJECTIVES = ("pointwise", "statistics")
+OBJECTIVES = ("pointwise", "statistics", "likelihood")
+LINEARISABLE = ("pointwise", "likelihood")   # sample by sample: refinement and Jacobian intervals apply
 BAD_VALUE = 100.0  # worse than any simulation that ran (7 channels at NRMSD ~3.8)
 
 
@@ -64,7 +69,9 @@ class IdentificationProblem:
     sample_rate: Optional[float] = None  # Hz; None: read off the times (triggered.sample_rate_of)
     protocol: Protocol = field(default_factory=Protocol)  # what the sorter did (lss_fmu.protocol)
     v_nominal: Optional[float] = None    # the record's nominal set point (scales a speed-step's v_from)
-    objective: str = "pointwise"         # pointwise: Eq. 10-12; statistics: spectra and distributions (features)
+    objective: str = "pointwise"         # pointwise: Eq. 10-12; statistics: spectra and distributions (features);
+                                         # likelihood: RMSD over the declared noise
+    noise: Optional[np.ndarray] = None   # per force channel, N: the sensor's white noise (likelihood)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
 
     def __post_init__(self):
@@ -73,6 +80,13 @@ class IdentificationProblem:
         if self.model not in CONTACT_MODELS:
             raise ValueError(f"unknown contact model {self.model!r}: use one of {', '.join(CONTACT_MODELS)}")
         self.samples = np.asarray(self.samples, float)
+        if self.noise is not None:
+            self.noise = np.asarray(self.noise, float)
+            if self.noise.shape != (len(FORCE_CHANNELS),) or not np.all(np.isfinite(self.noise) & (self.noise > 0)):
+                raise ValueError(f"noise must be {len(FORCE_CHANNELS)} positive values (N), got {self.noise}")
+        if self.objective == "likelihood" and self.noise is None:
+            raise ValueError("the likelihood objective needs the sensor's noise per channel (meta.json "
+                             "sensor.force_noise_std_N)")
         self.times = np.asarray(self.times, float)
         if self.tare is not None:
             self.tare = np.asarray(self.tare, float)
@@ -200,6 +214,8 @@ class IdentificationProblem:
         if self.objective == "statistics":
             from .features import stat_errors
             return stat_errors(self.samples, self.simulate(x), self.rate, self.tare)
+        if self.objective == "likelihood":
+            return np.sqrt(np.mean(tared(self.samples - self.simulate(x), self.tare) ** 2, axis=0)) / self.noise
         return nrmsd(self.samples, self.simulate(x), self.tare)
 
     def __call__(self, x: Sequence[float]) -> float:
@@ -264,6 +280,7 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
             float(x0.get("drive.v_ref", meas.meta["speed_nominal"])), settle)
     tol = tare_of(meas.meta) if tare else None
     aa = anti_alias_of(meas.meta)
+    noise = noise_of(meas) if objective == "likelihood" else None
     if aa is not None and len(t) > 1 and aa[1] >= 0.99 / float(np.median(np.diff(t))):
         log.warning("%s: anti-alias filter at %g Hz is not below the sample rate; not modelled", meas.id, aa[1])
         aa = None
@@ -271,7 +288,7 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
                                  name=meas.id, tare=tol, anti_alias=aa, sample_rate=meas.sample_rate,
                                  protocol=protocol, v_nominal=float(meas.meta["speed_nominal"]), objective=objective,
-                                 sim=sim or LazySimulator())
+                                 noise=noise, sim=sim or LazySimulator())
 
 
 FILTER_LEAD = 0.05   # s of simulated history before the trigger for the anti-alias filter (~12 time constants)
@@ -299,6 +316,23 @@ def transducer_for(track, s_m: float, v: float, settle: float) -> int:
     from lss_fmu.triggered import arriving_cart
     return arriving_cart(float(track.length), int(track.n_carts), s_m, max(abs(v), 0.1), settle + 1.5,
                          earliest=settle + 1.0)[0]
+
+
+def noise_of(meas) -> np.ndarray:
+    """The declared white noise per force channel, N (meta.json
+    sensor.force_noise_std_N); an error naming the file and the channel if a
+    channel is missing or not a positive number."""
+    declared = ((meas.meta or {}).get("sensor") or {}).get("force_noise_std_N")
+    where = f"{getattr(meas, 'path', None) or meas.id}/meta.json: sensor.force_noise_std_N"
+    if not isinstance(declared, Mapping):
+        raise ValueError(f"{where} is not declared: the likelihood objective needs the noise of every channel")
+    out = []
+    for c in FORCE_CHANNELS:
+        v = declared.get(c)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise ValueError(f"{where}[{c!r}] = {v!r}: must be a positive number of newtons")
+        out.append(float(v))
+    return np.array(out)
 
 
 def tare_of(meta: Optional[Mapping] = None) -> np.ndarray:

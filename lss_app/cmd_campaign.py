@@ -21,8 +21,9 @@ def register(sub, common) -> None:
     ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")
-    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics"),
-                    help="pointwise: Eq. 10-12 (default); statistics: spectra and amplitude distributions")
+    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics", "likelihood"),
+                    help="pointwise: Eq. 10-12 (default); statistics: spectra and amplitude distributions; "
+                         "likelihood: the residual over the declared noise")
     ap.add_argument("--presolve", type=int, default=0,
                     help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
     ap.add_argument("--refine-evals", type=int, default=0,

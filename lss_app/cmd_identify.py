@@ -23,9 +23,10 @@ def register(sub, common) -> None:
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
     ap.add_argument("--restarts", type=int, default=0,
                     help="restart a converged complex around the best point up to N times (0: as published)")
-    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics"),
+    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics", "likelihood"),
                     help="pointwise: the paper's Eq. 10-12 (default); statistics: spectra and amplitude "
-                         "distributions per channel, for steady running (docs/identification.md)")
+                         "distributions per channel, for steady running; likelihood: the residual over the "
+                         "sensor's declared noise, for transient records (docs/identification.md)")
     ap.add_argument("--presolve", type=int, default=0,
                     help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
