@@ -48,6 +48,9 @@ def register(sub, common) -> None:
                     help="what the sorter does while the cart logs (docs/measurements.md): steady running from "
                          "the photocell for a lap (default), a start-up from standstill at full thrust, a speed "
                          "step, a stop, a start-stop (a start braked after 1 s)")
+    ap.add_argument("--repeat", type=int, default=0, metavar="K",
+                    help="the K-th run of a start-up or start-stop on the same sorter: the chain parked "
+                         "elsewhere, another noise draw (default 0; write each K into its own folder)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.set_defaults(run=run)
 
@@ -87,7 +90,8 @@ def run(args) -> int:
                                    fmu=args.fmu, lap_seconds=args.lap_seconds, overwrite=args.overwrite,
                                    progress=not args.no_progress,
                                    log=lambda msg: print(msg, file=sys.stderr), effects=effects,
-                                   effect_seed=args.effect_seed, artefacts=artefacts, protocol=args.protocol)
+                                   effect_seed=args.effect_seed, artefacts=artefacts, protocol=args.protocol,
+                                   repeat=args.repeat)
     except (FileExistsError, ValueError, OSError) as exc:
         print(f"lss rig: {exc}", file=sys.stderr)
         return 2

@@ -63,8 +63,10 @@ KI_DEFAULT = float(BY_NAME["drive.Ki"].start)
 
 
 def symbol(name: str) -> str:
-    """The paper's symbol of a design variable; effect parameters keep their FMU name."""
-    return SYMBOL.get(name, name)
+    """The paper's symbol of a design variable; effect parameters keep their FMU name;
+    NAME@k (the k-th record's own value in a joint identification) is SYMBOL@k."""
+    base, at, k = name.partition("@")
+    return SYMBOL.get(name, SYMBOL.get(base, base) + at + k if at else name)
 
 
 def is_effect_parameter(name: str) -> bool:

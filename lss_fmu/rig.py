@@ -223,10 +223,11 @@ class Case:
     artefacts: dict = dataclasses.field(default_factory=dict)   # name -> definition (sensor stage)
     effect_seed: Optional[int] = None
     protocol: Protocol = dataclasses.field(default_factory=Protocol)
+    repeat: int = 0            # the k-th run of a from-rest protocol: the chain parked elsewhere, another noise draw
 
     @property
     def id(self) -> str:
-        return f"{self.set}-{folder_name(self.number)}"
+        return f"{self.set}-{folder_name(self.number)}" + (f"-r{self.repeat}" if self.repeat else "")
 
     @property
     def cost(self) -> float:
@@ -287,9 +288,14 @@ def _as_built_track(layout: str, seed: int, out_dir: Optional[Path]) -> tuple:
 def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir: Optional[Path] = None,
               lap_seconds: Optional[float] = None, extra_params: Optional[Mapping] = None,
               effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-              artefacts: Sequence[str] = (), protocol: str = "steady") -> Case:
+              artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0) -> Case:
     """The definition of measurement `number` of a set, drawn from the seed,
     measured with `protocol` (rig_protocol).
+
+    `repeat` k > 0: the same sorter (every drawn value the same) started from
+    rest once more, after the chain stopped somewhere else: another parking
+    position of the transducer cart and another draw of the sensor's noise
+    and offsets. Only for the protocols that start from rest.
 
     The draws of the layout-dependent values depend only on (seed, layout) and
     (seed, number), not on the set or on which other measurements are made, so
@@ -343,10 +349,15 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
     track = load_track(layout_fmu if set_name == "field" and layout_fmu != layout else layout)
     L, N = float(track.length), int(track.n_carts)
     proto = rig_protocol(protocol, v_nom)
+    if isinstance(repeat, bool) or not isinstance(repeat, int) or repeat < 0:
+        raise ValueError(f"repeat {repeat!r}: must be a whole number, 0 or more")
+    if repeat and not proto.from_rest:
+        raise ValueError(f"repeat {repeat}: only a protocol that starts from rest (start-up, start-stop) can be "
+                         f"repeated with the chain parked elsewhere, not {protocol!r}")
     if proto.from_rest:
         # the chain stopped wherever it stopped: the transducer cart's axle is parked at s_M, read off the
         # track marks to 0.1 m (s_M_nom); cart 0 of the FMU is the transducer (the carts are alike)
-        rp = np.random.default_rng([seed, number, 7])
+        rp = np.random.default_rng([seed, number, 7] + ([repeat] if repeat else []))
         s_M_nom = round(float(rp.uniform(0.0, L)), 1) % L
         s_M = (s_M_nom + _clip(rp.normal(0.0, SM_STD), -SM_MAX, SM_MAX)) % L
         truth["s_M"] = s_M
@@ -382,7 +393,7 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
     if extra_params:
         params.update(extra_params)
     return Case(set_name, number, seed, layout, layout_fmu, L, N, v_nom, d_nom, d_factor, s_M_nom, truth, cor,
-                law, params, field, idx, arrival, stop, eff, arts, eseed, proto)
+                law, params, field, idx, arrival, stop, eff, arts, eseed, proto, repeat)
 
 
 def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) -> dict:
@@ -408,7 +419,8 @@ def meta_for(case: Case, sensor: SensorModel, n_samples: int, full_lap: bool) ->
         "Ki_nominal": float(BY_NAME["drive.Ki"].start),
         "transducer_cart": "virtual transducer cart (lss_fmu.rig)",
         "source": f"lss rig --set {case.set} --seed {case.seed}" + (
-            f" --protocol {case.protocol.name}" if case.protocol.name != "steady" else ""),
+            f" --protocol {case.protocol.name}" if case.protocol.name != "steady" else "") + (
+            f" --repeat {case.repeat}" if case.repeat else ""),
         "notes": (f"Synthetic measurement {case.number} of the paper's campaign: layout {case.layout[-1]}, "
                   f"speed set point {case.speed_nominal:g} m/s, pretension {case.pretension_factor:g} x the "
                   f"layout's nominal. " + _logging_note(case, n_samples, full_lap)),
@@ -443,7 +455,7 @@ def _logging_note(case: Case, n_samples: int, full_lap: bool) -> str:
 def truth_for(case: Case, acq: dict, sensor: SensorModel, gen: dict, fmu_sha: str) -> dict:
     return {
         "WARNING": "ground truth: identification must never read this file",
-        "set": case.set, "number": case.number, "id": case.id, "seed": case.seed,
+        "set": case.set, "number": case.number, "id": case.id, "seed": case.seed, "repeat": case.repeat,
         "layout": case.layout,
         "contact_law": case.contact_law, "contact_model": CONTACT_MODELS[case.contact_law],
         "contact_law_note": ("LW, the law identification is expected to recover" if case.contact_law == "LW" else
@@ -531,7 +543,7 @@ def simulate_case(case: Case, sim, sensor: SensorModel, lap_seconds: Optional[fl
     arts = {}
     if case.artefacts:  # outside the catalogue: in the sensor stage, before the anti-alias filter
         rec, arts = E.apply_artefacts(rec, case.artefacts, case.track_length, arm_time=arm)
-    rng = np.random.default_rng([case.seed, case.number, 1])
+    rng = np.random.default_rng([case.seed, case.number, 1] + ([case.repeat] if case.repeat else []))
     n = None if lap_seconds is None and not proto.transient else int(round(
         (TRANSIENT_RECORD if lap_seconds is None else lap_seconds) * sensor.sample_rate))
     samples, acq = sensor.acquire(rec, case.truth["s_M"], case.track_length, rng, arm_time=arm,
@@ -585,13 +597,14 @@ def run_measurement(set_name: str, number: int, out: Union[str, Path], sim, seed
                     lap_seconds: Optional[float] = None, sensor: Optional[SensorModel] = None,
                     fmu_sha: str = "", overwrite: bool = False, extra_params: Optional[Mapping] = None,
                     effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-                    artefacts: Sequence[str] = (), protocol: str = "steady") -> dict:
-    """Simulate one measurement and write DIR/mNN and DIR/answers/mNN/truth.json."""
+                    artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0) -> dict:
+    """Simulate one measurement and write DIR/mNN and DIR/answers/mNN/truth.json
+    (`repeat`: make_case's)."""
     out = Path(out)
     sensor = sensor or SensorModel()
     t0, c0 = time.perf_counter(), time.process_time()
     case = make_case(set_name, number, seed, answers_dir(out), lap_seconds, extra_params, effects, effect_seed,
-                     artefacts, protocol)
+                     artefacts, protocol, repeat)
     samples, acq, _ = simulate_case(case, sim, sensor, lap_seconds)
     t_sim_wall, t_sim_cpu = time.perf_counter() - t0, time.process_time() - c0
     meta = meta_for(case, sensor, acq["n_samples"], acq["full_lap"])
@@ -626,18 +639,18 @@ def _init_worker(fmu: str) -> None:
     _WORKER["sim"] = ChainSimulator(Path(fmu), instance_name=f"rig{os.getpid()}")
 
 
-def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), None, (), "steady")):
+def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), None, (), "steady", 0)):
     try:
         return run_measurement(set_name, number, out, _WORKER["sim"], seed, lap_seconds, fmu_sha=fmu_sha,
                                overwrite=overwrite, effects=fx[0], effect_seed=fx[1], artefacts=fx[2],
-                               protocol=fx[3])
+                               protocol=fx[3], repeat=fx[4])
     except Exception as exc:  # one failed measurement must not stop the set
         return {"number": number, "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
 
 
 def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
-              fx: tuple = ((), None, (), "steady")) -> Optional[str]:
+              fx: tuple = ((), None, (), "steady", 0)) -> Optional[str]:
     """None if measurement `number` is not in `out`; "" if it is there and is what
     this run would make (same set, seed, FMU, parameters, undeclared effects and
     artefacts, protocol, full lap); otherwise the reason why it differs. `fx`: (effects,
@@ -655,7 +668,10 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
         return "it is a shortened run (--lap-seconds)"
     if t.get("fmu_sha256") != sha:
         return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
-    case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2], protocol=fx[3])
+    case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2], protocol=fx[3],
+                     repeat=fx[4])
+    if int(t.get("repeat") or 0) != case.repeat:
+        return f"it is repeat {int(t.get('repeat') or 0)} of the protocol, not {case.repeat}"
     had_protocol = t.get("protocol") or Protocol("steady", run_in=SETTLE_TIME).to_meta()
     if had_protocol != case.protocol.to_meta():
         return f"it was measured with protocol {had_protocol.get('name')}, not {case.protocol.name}"
@@ -681,7 +697,7 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
                  seed: int = DEFAULT_SEED, workers: Optional[int] = None, fmu: Optional[Union[str, Path]] = None,
                  lap_seconds: Optional[float] = None, overwrite: bool = False, progress: bool = True,
                  log=print, effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-                 artefacts: Sequence[str] = (), protocol: str = "steady") -> list:
+                 artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0) -> list:
     """Generate measurements of a set into `out`, in parallel, measured with
     `protocol` (rig_protocol: steady, start-up, speed-step, stop, start-stop).
 
@@ -703,9 +719,10 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
     if set_name not in SETS:
         raise ValueError(f"unknown set {set_name!r} (known: {', '.join(SETS)})")
     rig_protocol(protocol, 1.0)   # an unknown name: refused before anything is written
+    make_case(set_name, ALL_NUMBERS[0], seed, protocol=protocol, repeat=repeat)   # so is a repeat it cannot make
     effects, artefacts = E.parse_effects(effects), E.parse_artefacts(artefacts)
     fx = (tuple(effects), None if not (effects or artefacts) else int(seed if effect_seed is None else effect_seed),
-          tuple(artefacts), protocol)
+          tuple(artefacts), protocol, int(repeat))
     numbers = list(ALL_NUMBERS) if numbers is None else sorted(set(int(n) for n in numbers))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -745,7 +762,7 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
     todo = sorted(set(todo) | set(stale))
     # longest first: better balance over the workers
     cases = {n: make_case(set_name, n, seed, None, lap_seconds, effects=fx[0], effect_seed=fx[1], artefacts=fx[2],
-                          protocol=fx[3])
+                          protocol=fx[3], repeat=fx[4])
              for n in todo}
     todo.sort(key=lambda n: -cases[n].cost)
     workers = max(1, min(workers or os.cpu_count() or 1, len(todo) or 1))

@@ -1,0 +1,98 @@
+"""Several start-stops of one sorter identified together (issue 17):
+`lss rig --repeat K` parks the chain elsewhere and draws the sensor anew,
+identification.joint.JointProblem shares the design variables and keeps
+each record's trigger point."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from identification.identify import identify
+from identification.joint import JointProblem
+from identification.problem import from_measurement
+from identification.uncertainty import intervals
+from lss_fmu import measurement as M
+from lss_fmu.design import CORS, DESIGN, TRIGGER
+from lss_fmu.rig import load_truth, make_case, run_measurement, true_design_values
+
+NUMBER, WINDOW = 19, 2.0
+
+
+@pytest.fixture(scope="module")
+def records(tmp_path_factory, fmu_file):
+    from lss_fmu.runner import ChainSimulator
+    out = tmp_path_factory.mktemp("joint")
+    with ChainSimulator() as sim:
+        for k in range(2):
+            run_measurement("recovery", NUMBER, out / f"r{k}", sim, protocol="start-stop", lap_seconds=WINDOW + 0.2,
+                            repeat=k)
+    return [M.load_measurement(out / f"r{k}" / f"m{NUMBER:02d}") for k in range(2)]
+
+
+def _problems(records, cors_only: bool):
+    out = []
+    for rec in records:
+        p = from_measurement(rec, "LW", window=WINDOW, tare=True, objective="likelihood")
+        if cors_only:
+            truth = true_design_values(load_truth(rec))
+            p = dataclasses.replace(p, free=CORS, x0={**p.x0, **{n: truth[n] for n in DESIGN[4:]}})
+        out.append(p)
+    return out
+
+
+def test_a_repeat_is_the_same_sorter_parked_elsewhere(records):
+    a, b = (true_design_values(load_truth(r)) for r in records)
+    assert {k: v for k, v in a.items() if k != TRIGGER} == {k: v for k, v in b.items() if k != TRIGGER}
+    assert abs(a[TRIGGER] - b[TRIGGER]) > 1.0
+    assert records[1].id == f"recovery-m{NUMBER:02d}-r1" and "--repeat 1" in records[1].meta["source"]
+    assert not np.allclose(records[0].forces.to_numpy(), records[1].forces.to_numpy())
+    with pytest.raises(ValueError, match="only a protocol that starts from rest.*'steady'"):
+        make_case("recovery", NUMBER, protocol="steady", repeat=1)
+    with pytest.raises(ValueError, match="repeat -1"):
+        make_case("recovery", NUMBER, protocol="start-stop", repeat=-1)
+
+
+def test_the_joint_problem_is_the_records_side_by_side(records):
+    parts = _problems(records, cors_only=False)
+    jp = JointProblem(parts)
+    assert jp.free == tuple(DESIGN) + (f"{TRIGGER}@1",)
+    x = jp.x0_vector()
+    assert x[-1] == parts[1].x0[TRIGGER] and x[DESIGN.index(TRIGGER)] == parts[0].x0[TRIGGER]
+    assert jp.bounds[f"{TRIGGER}@1"] == parts[1].bounds[TRIGGER]
+    x0, x1 = jp.part_x(0, x), jp.part_x(1, x)
+    assert jp(x) == pytest.approx(parts[0](x0) + parts[1](x1), rel=1e-12)
+    assert jp.simulate(x).shape == (len(parts[0].times), 14) and len(jp.noise) == 14
+    assert np.sum(jp.channel_errors(x) ** 2) == pytest.approx(jp(x), rel=1e-12)
+    assert jp.values(x)[f"{TRIGGER}@1"] == x1[DESIGN.index(TRIGGER)]
+    short = from_measurement(records[1], "LW", window=1.0, tare=True, objective="likelihood")
+    with pytest.raises(ValueError, match="same window"):
+        JointProblem([parts[0], short])
+    with pytest.raises(ValueError, match="objective"):
+        JointProblem([parts[0], dataclasses.replace(parts[1], objective="pointwise", noise=None)])
+    bad = x.copy()
+    bad[DESIGN.index("drive.Kp")] = -1e9          # the FMU refuses it: a failed record fails the joint value
+    assert jp(bad) == 2 * parts[0].bad_value
+
+
+def test_two_records_identify_the_cors_closer_than_one(records):
+    """The drive known, the CoRs free: each of e_JA, e_SW, e_RW within 3 of its
+    standard deviations of the truth, and those standard deviations below
+    0.85 of one record's (1 / sqrt 2 = 0.71 for two records alike)."""
+    parts = _problems(records, cors_only=True)
+    jp = JointProblem(parts)
+    truth = true_design_values(load_truth(records[0]))
+    xt = np.array([truth[n] for n in CORS])
+    try:
+        one = {iv.name: iv for iv in intervals(parts[0], xt)}
+        res = identify(jp, max_evals=120, refine_evals=40, uncertainty=True, seed=0, progress=False)
+    finally:
+        jp.close()
+    assert res.f <= jp(xt) + 10.0 / len(parts[0].times)
+    both = {iv.name: iv for iv in res.intervals}
+    for name in ("contact.e_JA", "contact.e_SW", "contact.e_RW"):
+        err = dict(zip(CORS, res.x))[name] - truth[name]
+        assert abs(err) <= 3.0 * both[name].sd, (name, err, both[name])
+        assert both[name].sd < 0.85 * one[name].sd, (name, both[name].sd, one[name].sd)
+    assert res.to_dict()["measurement"] == f"recovery-m{NUMBER:02d} (+1 records)"
