@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from identification.campaign import run_campaign  # noqa: E402
+from identification.joint import JointProblem  # noqa: E402
 from identification.problem import from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
@@ -117,10 +118,15 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
         path = out / f"m{n:02d}.json"
         if not path.exists():
             m = load_measurement(data / f"m{n:02d}")
-            p = from_measurement(m, "LW", window=args.window, tare=tare, objective=args.objective)
             truth = load_truth(m)
-            known = {d: v for d, v in true_design_values(truth).items() if d in DESIGN[4:]}
-            p = dataclasses.replace(p, free=tuple(CORS), x0={**p.x0, **known})
+            parts = []
+            for k in range(args.repeats):   # record k: repeat k of the protocol (the chain parked elsewhere)
+                folder = (data if k == 0 else data.parent / f"data_r{k}") / f"m{n:02d}"
+                mk = load_measurement(folder)
+                pk = from_measurement(mk, "LW", window=args.window, tare=tare, objective=args.objective)
+                known = {d: v for d, v in true_design_values(load_truth(mk)).items() if d in DESIGN[4:]}
+                parts.append(dataclasses.replace(pk, free=tuple(CORS), x0={**pk.x0, **known}))
+            p = parts[0] if len(parts) == 1 else JointProblem(parts)
             c0 = time.process_time()
             try:
                 res = identify(p, max_evals=args.max_evals, seed=args.seed, progress=False,
@@ -128,13 +134,29 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
                                journal=out / "journals" / f"m{n:02d}.jsonl")
                 r = res.to_dict()
                 r.update({"cpu_s": time.process_time() - c0, "number": n, "layout": m.layout,
-                          "measurement": m.id, "measurement_dir": str(data / f"m{n:02d}")})
+                          "measurement": res.problem.name, "measurement_dir": str(data / f"m{n:02d}"),
+                          "records": len(parts)})
                 r["f_truth"] = float(p(_truth_x(truth, p.free)))
             finally:
-                p.sim.close()
+                for q in parts:
+                    q.sim.close()
             write_json_atomic(path, r)
         rows.append(json.loads(path.read_text()))
     return rows
+
+
+def set_fmu(data: Path):
+    """The FMU that made most of the set already in `data` (a rebuild since, e.g.
+    by the tests, is another file: the set stays one FMU's), or None."""
+    from collections import Counter
+    shas = Counter()
+    for t in (data / "answers").glob("m*/truth.json"):
+        shas[json.loads(t.read_text()).get("fmu_sha256", "")[:12]] += 1
+    for sha, _ in shas.most_common():
+        hit = sorted((data / "fmu").glob(f"LSSChain-{sha}*.fmu")) if sha else []
+        if hit:
+            return hit[0]
+    return None
 
 
 def main(argv=None) -> int:
@@ -153,6 +175,9 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     ap.add_argument("--objective", default="pointwise", choices=("pointwise", "likelihood"),
                     help="the identification's objective (identification.problem)")
+    ap.add_argument("--repeats", type=int, default=1,
+                    help="with --cors-only: identify K records of each measurement together (lss rig --repeat "
+                         "0..K-1 of a start-up or start-stop; identification.joint)")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     args = ap.parse_args(argv)
@@ -168,11 +193,18 @@ def main(argv=None) -> int:
         runs = base if args.objective == "pointwise" else base / args.objective   # the set is shared
         data, out = base / "data", base / "campaign"
         t0, c0 = time.time(), time.process_time()
+        fmu = set_fmu(data)
         gen = generate_set("recovery", data, numbers, workers=args.workers, protocol=protocol, progress=True,
-                           log=lambda msg: print(msg, file=sys.stderr))
+                           log=lambda msg: print(msg, file=sys.stderr), fmu=fmu)
         gen_cpu = sum(r.get("cpu_s", 0.0) for r in gen if "cpu_s" in r)
         if args.cors_only:
-            results = cors_only(data, runs / "cors_only", numbers, args, tare)
+            for k in range(1, args.repeats):
+                generate_set("recovery", base / f"data_r{k}", numbers, workers=args.workers, protocol=protocol,
+                             progress=True, repeat=k, log=lambda msg: print(msg, file=sys.stderr), fmu=fmu)
+            if args.repeats > 1:
+                label += f", {args.repeats} records"
+            results = cors_only(data, runs / ("cors_only" if args.repeats == 1 else f"cors_only_k{args.repeats}"),
+                                numbers, args, tare)
             cache = {r["measurement"]: r["f_truth"] for r in results}
             rows = rows_of(results, data, args.window, tare, cache, args.objective)
             entry = {"rows": rows, "summary": summary(rows), "wall_s": time.time() - t0}

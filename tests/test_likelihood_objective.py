@@ -87,3 +87,21 @@ def test_a_record_without_its_noise_is_refused_by_name(record, tmp_path, spoil, 
     msg = str(info.value)
     assert "meta.json" in msg and "force_noise_std_N" in msg and fragment in msg, msg
     from_measurement(meas, "LW")                         # the paper's objective does not need it
+
+
+def test_no_interval_is_claimed_from_a_fit_above_the_noise(record):
+    """With the noise declared, a fit that stays far above it (here the CoRs
+    0.2 off, the drive at the truth) gets no interval: every variable is
+    reported not identifiable, saying why; at the truth every interval is
+    "at the noise"."""
+    from identification.uncertainty import intervals
+    p = from_measurement(record, "LW", tare=True, objective="likelihood")
+    p = dataclasses.replace(p, free=CORS, x0={**p.x0, **true_design_values(load_truth(record))})
+    xt = np.array([p.x0[n] for n in CORS])
+    far = np.clip(xt + np.array([0.2, 0.0, -0.2, 0.2]), 0.2, 0.9)
+    off = intervals(p, far)
+    assert all(iv.at_noise is False and not iv.identifiable for iv in off), off
+    assert "above the sensor's noise" in str(off[0])
+    assert all(iv.at_noise is True for iv in intervals(p, xt))
+    q = dataclasses.replace(p, objective="pointwise", noise=None)
+    assert all(iv.at_noise is None for iv in intervals(q, far))   # the paper's objective declares no noise
