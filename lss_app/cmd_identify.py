@@ -13,6 +13,10 @@ def register(sub, common) -> None:
     ap = sub.add_parser("identify", parents=[common], help="identify one measurement",
                         description="Identify one measurement with Complex-RF.")
     ap.add_argument("measurement", help="measurement folder (samples.csv + meta.json)")
+    ap.add_argument("--with", dest="with_records", nargs="+", default=None, metavar="DIR",
+                    help="further records of the same sorter (e.g. lss rig --repeat 1, 2 of a start-stop), "
+                         "identified together with the first: the design shared, each record's trigger "
+                         "point its own (identification.joint)")
     ap.add_argument("--model", required=True, help="contact model: HC, HW, LW, LN, GZ or FL")
     ap.add_argument("--out", required=True, help="output folder")
     ap.add_argument("--max-evals", type=int, default=5000)
@@ -56,6 +60,12 @@ def run(args) -> int:
     meas = load_measurement(args.measurement)
     problem = from_measurement(meas, model, free=parse_free(args.free), window=args.window, tare=args.tare,
                                objective=args.objective)
+    first = problem
+    if args.with_records:
+        from identification.joint import JointProblem
+        problem = JointProblem([first] + [
+            from_measurement(load_measurement(d), model, free=parse_free(args.free), window=args.window,
+                             tare=args.tare, objective=args.objective) for d in args.with_records])
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
@@ -65,16 +75,17 @@ def run(args) -> int:
                    refine_evals=args.refine_evals, uncertainty=True, presolve=args.presolve)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{meas.id}, model {model}"
-    try:
-        initial = problem.simulate(res.x0)
-        optimum = problem.simulate(res.x)
+    x0, x = (res.x0, res.x) if problem is first else (problem.part_x(0, res.x0), problem.part_x(0, res.x))
+    try:   # the figures: the first record
+        initial = first.simulate(x0)
+        optimum = first.simulate(x)
     except Exception as exc:  # figures of a failed point: measured only
         logging.warning("cannot simulate for the figures: %s", exc)
         initial = optimum = None
-    forces_overlay(problem.times, problem.samples, initial, optimum, out / "forces", title)
+    forces_overlay(first.times, first.samples, initial, optimum, out / "forces", title)
     history(res.history_f, out / "history", title)
     nrmsd_bars(res.H0, res.H, out / "nrmsd", title)
-    print(f"{meas.id} {model} ({problem.protocol.name}): f {res.f0:.4g} -> {res.f:.4g} after {res.nfev} "
+    print(f"{problem.name} {model} ({problem.protocol.name}): f {res.f0:.4g} -> {res.f:.4g} after {res.nfev} "
           f"evaluations ({res.replayed} from the journal; {res.message})")
     for iv in res.intervals or []:
         print(f"  {iv}")

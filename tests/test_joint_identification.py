@@ -96,3 +96,21 @@ def test_two_records_identify_the_cors_closer_than_one(records):
         assert abs(err) <= 3.0 * both[name].sd, (name, err, both[name])
         assert both[name].sd < 0.85 * one[name].sd, (name, both[name].sd, one[name].sd)
     assert res.to_dict()["measurement"] == f"recovery-m{NUMBER:02d} (+1 records)"
+
+
+def test_lss_identify_takes_further_records(records, tmp_path):
+    """`lss identify FIRST --with SECOND`: one result for both records, the
+    second's trigger point its own variable."""
+    import json
+    import subprocess
+    import sys
+    out = tmp_path / "joint"
+    cp = subprocess.run([sys.executable, "-m", "lss_app.cli", "identify", str(records[0].path), "--with",
+                         str(records[1].path), "--model", "LW", "--out", str(out), "--window", str(WINDOW),
+                         "--tare", "--objective", "likelihood", "--free", "e_JA,e_SW,s_M", "--max-evals", "8",
+                         "--refine-evals", "0", "--no-progress"], capture_output=True, text=True, timeout=600)
+    assert cp.returncode == 0, cp.stderr
+    res = json.loads((out / "result.json").read_text())
+    assert res["free"] == ["contact.e_JA", "contact.e_SW", TRIGGER, f"{TRIGGER}@1"]
+    assert "s_M@1" in res["values"] and res["measurement"].endswith("(+1 records)")
+    assert (out / "forces.png").is_file()
