@@ -305,29 +305,33 @@ def figure(summary: dict, path: Path) -> None:
         d = summary["detection"][fam]
         xs = [row["amplitude"] for row in d["rows"] if row["records"]]
         ys = [100 * row["rate"] for row in d["rows"] if row["records"]]
-        ax.semilogx(xs, ys, "o-", color="tab:blue")
+        yw = [100 * row["wrong_effect"] / row["records"] for row in d["rows"] if row["records"]]
+        ax.semilogx(xs, ys, "o-", color="tab:blue", label="the effect confirmed")
+        ax.semilogx(xs, yw, "x--", color="tab:orange", label="another effect confirmed")
         ax.axhline(90, color="tab:red", ls="--", lw=1)
         ax.set_ylim(-5, 105)
         ax.set_title(fam, fontsize=10)
         ax.set_xlabel(d["unit"], fontsize=8)
         ax.set_ylabel("found, %", fontsize=8)
         ax.grid(alpha=0.3, which="both")
+    axes.ravel()[0].legend(fontsize=7)
     for ax in axes.ravel()[len(fams):]:
         ax.axis("off")
     c = summary["clean"]
     fig.suptitle(f"Closed loop: detection rate against amplitude (release transient, layout 7); clean records: "
                  f"{len(c['false_confirmations'])} false confirmation(s) in {c['records']}", fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    from lss_app.figures.save import save_figure
+    save_figure(fig, path)
 
 
 def table(summary: dict) -> str:
     lines = ["| effect | amplitude | " + " | ".join(f"a{i}" for i in range(4)) + " | smallest found in >= 90 % |",
              "|---|---|---|---|---|---|---|"]
     for fam, d in summary["detection"].items():
-        cells = [f"{row['amplitude']:g}: {row['found']}/{row['records']}" for row in d["rows"]]
+        cells = [f"{row['amplitude']:g}: {row['found']}/{row['records']}"
+                 + (f" ({row['wrong_effect']} wrong)" if row["wrong_effect"] else "") if row["records"]
+                 else f"{row['amplitude']:g}: -" for row in d["rows"]]
         best = "-" if d["smallest_90"] is None else f"{d['smallest_90']:g} {d['unit']}"
         lines.append(f"| {fam} | {d['unit']} | " + " | ".join(cells) + f" | {best} |")
     return "\n".join(lines)

@@ -643,7 +643,7 @@ def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), 
     try:
         return run_measurement(set_name, number, out, _WORKER["sim"], seed, lap_seconds, fmu_sha=fmu_sha,
                                overwrite=overwrite, effects=fx[0], effect_seed=fx[1], artefacts=fx[2],
-                               protocol=fx[3], repeat=fx[4])
+                               protocol=fx[3], repeat=fx[4] if len(fx) > 4 else 0)
     except Exception as exc:  # one failed measurement must not stop the set
         return {"number": number, "error": f"{type(exc).__name__}: {exc}",
                 "traceback": traceback.format_exc()}
@@ -653,8 +653,8 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
               fx: tuple = ((), None, (), "steady", 0)) -> Optional[str]:
     """None if measurement `number` is not in `out`; "" if it is there and is what
     this run would make (same set, seed, FMU, parameters, undeclared effects and
-    artefacts, protocol, full lap); otherwise the reason why it differs. `fx`: (effects,
-    effect_seed, artefacts) of this run."""
+    artefacts, protocol, repeat, full lap); otherwise the reason why it differs. `fx`:
+    (effects, effect_seed, artefacts, protocol[, repeat]) of this run."""
     folder, truth = out / folder_name(number), answers_dir(out) / folder_name(number) / "truth.json"
     if not (folder / M.META_FILE).is_file() or not truth.is_file():
         return None
@@ -669,7 +669,7 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
     if t.get("fmu_sha256") != sha:
         return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
     case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2], protocol=fx[3],
-                     repeat=fx[4])
+                     repeat=fx[4] if len(fx) > 4 else 0)
     if int(t.get("repeat") or 0) != case.repeat:
         return f"it is repeat {int(t.get('repeat') or 0)} of the protocol, not {case.repeat}"
     had_protocol = t.get("protocol") or Protocol("steady", run_in=SETTLE_TIME).to_meta()
