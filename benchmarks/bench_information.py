@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 
 from identification.problem import from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
-from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
+from lss_fmu.design import CORS, SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
 from lss_fmu.rig import load_truth, parse_numbers, run_measurement, true_design_values  # noqa: E402
 from lss_fmu.runner import ChainSimulator  # noqa: E402
@@ -50,24 +50,13 @@ ROUGH = 0.5      # |forward - backward| / |central| (in the noise metric) beyond
 
 
 def information(p, x: np.ndarray, sigma: np.ndarray):
-    """J (noise-weighted, flattened), and per variable the roughness of the record in it."""
+    """J (noise-weighted, flattened), and per variable the roughness of the record
+    in it: uncertainty.jacobian with a fixed step of STEP of each bound range."""
+    from identification.uncertainty import jacobian
     lo, hi = np.array(p.bounds_array, float).T
-    base = p.simulate(x) / sigma
-    cols, rough = [], []
-    for k in range(len(x)):
-        h = STEP * (hi[k] - lo[k])
-        xp, xm = x.copy(), x.copy()
-        xp[k] = min(x[k] + h, hi[k])
-        xm[k] = max(x[k] - h, lo[k])
-        fp = p.simulate(xp) / sigma if xp[k] > x[k] else None    # one-sided at a bound
-        fm = p.simulate(xm) / sigma if xm[k] < x[k] else None
-        dp = None if fp is None else (fp - base) / (xp[k] - x[k])
-        dm = None if fm is None else (base - fm) / (x[k] - xm[k])
-        central = dm if dp is None else dp if dm is None else 0.5 * (dp + dm)
-        rough.append(float("nan") if dp is None or dm is None else
-                     float(np.linalg.norm(dp - dm) / max(np.linalg.norm(central), 1e-30)))
-        cols.append(central.ravel())
-    return np.array(cols).T, np.array(rough)
+    J, _, rough = jacobian(p, x, p.simulate(x), weights=1.0 / sigma ** 2, steps=STEP * (hi - lo))
+    J = J / sigma[None, :, None]
+    return J.reshape(-1, J.shape[2]), rough
 
 
 def bound_sd(J: np.ndarray, idx) -> np.ndarray:

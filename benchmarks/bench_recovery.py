@@ -30,9 +30,9 @@ import numpy as np  # noqa: E402
 
 from identification.campaign import run_campaign  # noqa: E402
 from identification.joint import JointProblem  # noqa: E402
-from identification.problem import from_measurement  # noqa: E402
+from identification.problem import drive_known, from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
-from lss_fmu.design import CORS, DESIGN, SYMBOL  # noqa: E402
+from lss_fmu.design import CORS, SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
 from lss_fmu.rig import generate_set, load_truth, parse_numbers, true_design_values  # noqa: E402
 
@@ -110,7 +110,6 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
     layout-dependent variables at their true values, the four CoRs free, the
     same pipeline. One result file per measurement, written atomically (a
     stopped run resumes)."""
-    import dataclasses
     from identification.identify import identify
     (out / "journals").mkdir(parents=True, exist_ok=True)
     rows = []
@@ -124,8 +123,7 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
                 folder = (data if k == 0 else data.parent / f"data_r{k}") / f"m{n:02d}"
                 mk = load_measurement(folder)
                 pk = from_measurement(mk, "LW", window=args.window, tare=tare, objective=args.objective)
-                known = {d: v for d, v in true_design_values(load_truth(mk)).items() if d in DESIGN[4:]}
-                parts.append(dataclasses.replace(pk, free=tuple(CORS), x0={**pk.x0, **known}))
+                parts.append(drive_known(pk, true_design_values(load_truth(mk))))
             p = parts[0] if len(parts) == 1 else JointProblem(parts)
             c0 = time.process_time()
             try:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import dataclasses
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Mapping, Optional, Sequence
@@ -238,6 +239,15 @@ class IdentificationProblem:
     def bad_value(self) -> float:
         """What a failed simulation scores: worse than any that ran."""
         return BAD_VALUES[self.objective]
+
+
+def drive_known(problem: IdentificationProblem, values: Mapping[str, float]) -> IdentificationProblem:
+    """The problem with the four CoRs free and the six layout-dependent
+    variables held at `values` (design name -> value): the drive's settings,
+    the set point, the pretension and the trigger point as a manufacturer
+    knows them (or, in a benchmark, the truth)."""
+    held = {n: float(values[n]) for n in DESIGN if n not in CORS}
+    return dataclasses.replace(problem, free=tuple(CORS), x0={**(problem.x0 or {}), **held})
 
 
 def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, window: Optional[float] = None,

@@ -24,6 +24,23 @@ def sim(fmu_file):
     s.close()
 
 
+@pytest.fixture(scope="session")
+def rig_record(tmp_path_factory, fmu_file):
+    """rig_record(number, protocol, seconds, repeat=0): a recovery measurement
+    made by the virtual transducer cart (lss_fmu.rig), loaded back as a
+    Measurement from its own folder (its answers beside it)."""
+    from lss_fmu import measurement as M
+    from lss_fmu.rig import folder_name, run_measurement
+    from lss_fmu.runner import ChainSimulator
+
+    def make(number: int, protocol: str, seconds: float, repeat: int = 0):
+        out = tmp_path_factory.mktemp(f"rig_{protocol}_m{number}_r{repeat}")
+        with ChainSimulator() as s:
+            run_measurement("recovery", number, out, s, protocol=protocol, lap_seconds=seconds, repeat=repeat)
+        return M.load_measurement(out / folder_name(number))
+    return make
+
+
 @pytest.fixture
 def data_dir() -> Path:
     return DATA

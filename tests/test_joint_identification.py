@@ -11,24 +11,17 @@ import pytest
 
 from identification.identify import identify
 from identification.joint import JointProblem
-from identification.problem import from_measurement
+from identification.problem import drive_known, from_measurement
 from identification.uncertainty import intervals
-from lss_fmu import measurement as M
 from lss_fmu.design import CORS, DESIGN, TRIGGER
-from lss_fmu.rig import load_truth, make_case, run_measurement, true_design_values
+from lss_fmu.rig import load_truth, make_case, true_design_values
 
 NUMBER, WINDOW = 19, 2.0
 
 
 @pytest.fixture(scope="module")
-def records(tmp_path_factory, fmu_file):
-    from lss_fmu.runner import ChainSimulator
-    out = tmp_path_factory.mktemp("joint")
-    with ChainSimulator() as sim:
-        for k in range(2):
-            run_measurement("recovery", NUMBER, out / f"r{k}", sim, protocol="start-stop", lap_seconds=WINDOW + 0.2,
-                            repeat=k)
-    return [M.load_measurement(out / f"r{k}" / f"m{NUMBER:02d}") for k in range(2)]
+def records(rig_record):
+    return [rig_record(NUMBER, "start-stop", WINDOW + 0.2, repeat=k) for k in range(2)]
 
 
 def _problems(records, cors_only: bool):
@@ -36,8 +29,7 @@ def _problems(records, cors_only: bool):
     for rec in records:
         p = from_measurement(rec, "LW", window=WINDOW, tare=True, objective="likelihood")
         if cors_only:
-            truth = true_design_values(load_truth(rec))
-            p = dataclasses.replace(p, free=CORS, x0={**p.x0, **{n: truth[n] for n in DESIGN[4:]}})
+            p = drive_known(p, true_design_values(load_truth(rec)))
         out.append(p)
     return out
 

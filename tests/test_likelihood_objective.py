@@ -10,22 +10,18 @@ import numpy as np
 import pytest
 
 from identification.attribution import weights
-from identification.problem import from_measurement
+from identification.problem import drive_known, from_measurement
 from identification.refine import refine
 from lss_fmu import measurement as M
 from lss_fmu.design import CORS
-from lss_fmu.rig import load_truth, run_measurement, true_design_values
+from lss_fmu.rig import load_truth, true_design_values
 from lss_fmu.sensor import NOISE_STD
 from lss_fmu.variables import FORCE_CHANNELS
 
 
 @pytest.fixture(scope="module")
-def record(tmp_path_factory, fmu_file):
-    from lss_fmu.runner import ChainSimulator
-    out = tmp_path_factory.mktemp("likelihood")
-    with ChainSimulator() as sim:
-        run_measurement("recovery", 5, out, sim, protocol="start-stop", lap_seconds=1.6)
-    return M.load_measurement(out / "m05")
+def record(rig_record):
+    return rig_record(5, "start-stop", 1.6)
 
 
 def _truth(meas, p) -> np.ndarray:
@@ -64,9 +60,10 @@ def test_a_wrong_cor_costs_what_the_record_says(record):
 
 def test_refinement_minimises_the_same_metric(record):
     p = from_measurement(record, "LW", tare=True, objective="likelihood")
-    p = dataclasses.replace(p, free=CORS, x0={**p.x0, **true_design_values(load_truth(record))})
+    truth = true_design_values(load_truth(record))
+    p = drive_known(p, truth)
     np.testing.assert_allclose(weights(p), 1.0 / (len(p.times) * p.noise ** 2))
-    x = np.array([p.x0[n] for n in CORS]) + np.array([0.05, 0.0, -0.05, 0.05])
+    x = np.array([truth[n] for n in CORS]) + np.array([0.05, 0.0, -0.05, 0.05])
     r = refine(p, x, max_evals=1, central=False)
     assert r.f_start == pytest.approx(p(x), rel=1e-9)
 
@@ -96,8 +93,9 @@ def test_no_interval_is_claimed_from_a_fit_above_the_noise(record):
     "at the noise"."""
     from identification.uncertainty import intervals
     p = from_measurement(record, "LW", tare=True, objective="likelihood")
-    p = dataclasses.replace(p, free=CORS, x0={**p.x0, **true_design_values(load_truth(record))})
-    xt = np.array([p.x0[n] for n in CORS])
+    truth = true_design_values(load_truth(record))
+    p = drive_known(p, truth)
+    xt = np.array([truth[n] for n in CORS])
     far = np.clip(xt + np.array([0.2, 0.0, -0.2, 0.2]), 0.2, 0.9)
     off = intervals(p, far)
     assert all(iv.at_noise is False and not iv.identifiable for iv in off), off

@@ -11,7 +11,7 @@ import pytest
 from identification.problem import from_measurement
 from lss_fmu import measurement as M
 from lss_fmu.protocol import Protocol, from_meta
-from lss_fmu.rig import load_truth, run_measurement, true_design_values
+from lss_fmu.rig import load_truth, true_design_values
 from test_measurement import make_meta, make_samples
 
 
@@ -75,12 +75,8 @@ def test_a_record_without_a_protocol_is_steady_running():
 
 # --- followed by the rig and the problem ---------------------------------------------------
 @pytest.fixture(scope="module")
-def start_up(tmp_path_factory, fmu_file):
-    from lss_fmu.runner import ChainSimulator
-    out = tmp_path_factory.mktemp("protocols")
-    with ChainSimulator() as sim:
-        run_measurement("recovery", 20, out, sim, protocol="start-up", lap_seconds=1.5)
-    return M.load_measurement(out / "m20")
+def start_up(rig_record):
+    return rig_record(20, "start-up", 1.5)
 
 
 def test_the_rig_writes_what_the_engineer_did(start_up):
@@ -107,14 +103,11 @@ def test_the_problem_follows_the_record(start_up):
     assert H[0] < 0.03, H      # the joint's axial force, the largest span, at the sensor's noise
 
 
-def test_a_start_stop_is_simulated_as_the_rig_measured_it(tmp_path, fmu_file):
+def test_a_start_stop_is_simulated_as_the_rig_measured_it(rig_record):
     """The rig's start-stop (a start at full thrust, braked 1 s later): the
     chain from rest, the set point back to 0; the problem, reading only the
     record, reproduces it to the sensor's noise at the truth."""
-    from lss_fmu.runner import ChainSimulator
-    with ChainSimulator() as sim:
-        run_measurement("recovery", 19, tmp_path, sim, protocol="start-stop", lap_seconds=2.0)
-    rec = M.load_measurement(tmp_path / "m19")
+    rec = rig_record(19, "start-stop", 2.0)
     assert rec.meta["protocol"] == {"name": "start-stop", "step_time": 1.0, "ramp_time": 0.0}
     assert "Start-stop from standstill" in rec.meta["notes"]
     v = rec.speeds.to_numpy()
