@@ -668,8 +668,10 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
         return "it is a shortened run (--lap-seconds)"
     if t.get("fmu_sha256") != sha:
         return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
-    case = make_case(set_name, number, seed, effects=fx[0], effect_seed=fx[1], artefacts=fx[2], protocol=fx[3],
-                     repeat=fx[4] if len(fx) > 4 else 0)
+    # with the answers folder: the field set's as-built track (rewritten, the same file) is what the
+    # chain's length, and so a from-rest protocol's relax time, came from
+    case = make_case(set_name, number, seed, answers_dir(out), effects=fx[0], effect_seed=fx[1], artefacts=fx[2],
+                     protocol=fx[3], repeat=fx[4] if len(fx) > 4 else 0)
     if int(t.get("repeat") or 0) != case.repeat:
         return f"it is repeat {int(t.get('repeat') or 0)} of the protocol, not {case.repeat}"
     had_protocol = t.get("protocol") or Protocol("steady", run_in=SETTLE_TIME).to_meta()

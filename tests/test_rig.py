@@ -164,3 +164,18 @@ def test_small_field_run(tmp_path):
     assert load_track(str(out / truth["layout_fmu"])).closure_error < 1e-6
     assert not math.isclose(truth["field_deviations"]["cart.mass_factor"], 1.0)
     assert M.find_measurements(out) == [out / "m22"]
+
+
+def test_field_start_stop_resumes(tmp_path):
+    """A field-set record from rest is kept by a second run: the relax time it was
+    made with comes from the as-built track's length, not the design's."""
+    out = tmp_path / "field"
+    rig.generate_set("field", out, [21], workers=1, protocol="start-stop", progress=False, log=lambda *_: None)
+    t = rig.load_truth(out / "m21")
+    sha = t["fmu_sha256"]
+    assert t["fmu_parameters"]["chain.relax_time"] == rig.rig_protocol("start-stop", 1.5).relax_time(
+        load_track(str(out / t["layout_fmu"])).length)
+    assert rig._existing(out, 21, "field", rig.DEFAULT_SEED, sha, ((), None, (), "start-stop", 0)) == ""
+    res = rig.generate_set("field", out, [21], workers=1, protocol="start-stop", progress=False,
+                           log=lambda *_: None, fmu=next((out / "fmu").glob("*.fmu")))
+    assert "error" not in res[0], res[0]
