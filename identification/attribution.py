@@ -69,7 +69,7 @@ class HypothesisScore:
     coef: np.ndarray      # effect coefficients (in the probes' units), from the joint fit
     probe_gain: np.ndarray  # per probe: share lost if it were dropped (sensor selection)
     hypothesis: Hypothesis = field(repr=False)
-    share_fit: Optional[float] = None   # share of f removed when fitted through the FMU (close_loop.rescore)
+    share_fit: Optional[float] = None   # share of f removed when fitted through the FMU (candidates.rescore)
     notes: list = field(default_factory=list)   # probes dropped as not identifiable, and why
 
     def to_dict(self) -> dict:

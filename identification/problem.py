@@ -47,6 +47,12 @@ def tared(residual: np.ndarray, tare: Optional[np.ndarray]) -> np.ndarray:
     return residual - np.clip(residual.mean(axis=0), -np.asarray(tare), np.asarray(tare))
 
 
+def weighted_residual(problem, sim: np.ndarray, w: np.ndarray) -> tuple:
+    """(tared residual, sum r^2 w) of a simulation of `problem` (w per channel)."""
+    r = tared(problem.samples - sim, problem.tare)
+    return r, float(np.sum(r ** 2 * w))
+
+
 def nrmsd(measured: np.ndarray, simulated: np.ndarray, tare: Optional[np.ndarray] = None) -> np.ndarray:
     """H_j per channel (Eq. 11-12); with `tare`, after the zero tolerance (see tared)."""
     span = measured.max(axis=0) - measured.min(axis=0)

@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from identification.catalogue import CATALOGUE  # noqa: E402
-from identification.evidence import ALPHA, EXCESS_MIN  # noqa: E402
+from identification.noise import ALPHA, EXCESS_MIN  # noqa: E402
 from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
 from lss_fmu.design import LABELS  # noqa: E402
 

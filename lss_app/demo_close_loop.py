@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from identification.evidence import ALPHA
+from identification.noise import ALPHA
 from lss_fmu.atomic import write_json_atomic
 
 EFFECT = "wheel_oor"

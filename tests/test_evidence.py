@@ -1,4 +1,5 @@
-"""The statistics behind a close-loop verdict (identification.evidence, issue 18).
+"""The statistics behind a close-loop verdict (identification.evidence, .noise,
+.holdout and .departures; issue 18).
 
 Pure numpy: white and correlated residuals made here, no FMU. What must hold:
 the noise estimate finds the white noise under a smooth model error; the
@@ -14,7 +15,10 @@ import dataclasses
 import numpy as np
 import pytest
 
+from identification import departures as D
 from identification import evidence as E
+from identification import holdout as HO
+from identification import noise as NZ
 
 N, K = 300, 7
 T = np.arange(N) / 300.0
@@ -38,12 +42,12 @@ def _smooth(rng, scale=1.0):
 def test_noise_estimate_sees_through_a_smooth_model_error():
     rng = np.random.default_rng(1)
     r = rng.normal(size=(N, K)) * SIG + _smooth(rng, 10.0)
-    est = E.estimate_noise(r)
+    est = NZ.estimate_noise(r)
     assert np.all(np.abs(est / SIG - 1) < 0.25), est / SIG
-    nz = E.noise_levels(r, {"transducer.joint.F_x": 1.0})   # incomplete declaration: estimated
+    nz = NZ.noise_levels(r, {"transducer.joint.F_x": 1.0})   # incomplete declaration: estimated
     assert nz.source == "estimated"
     from lss_fmu.sensor import NOISE_STD
-    assert E.noise_levels(r, NOISE_STD).source == "declared"
+    assert NZ.noise_levels(r, NOISE_STD).source == "declared"
 
 
 def _lr(r, cols, m=1, q=None):
@@ -90,7 +94,7 @@ def test_lr_test_finds_a_real_signature():
 
 
 def test_folds_interleave_equal_blocks():
-    f = E.folds(300, 16)
+    f = HO.folds(300, 16)
     assert set(f) == {0, 1} and abs(f.sum() - 150) <= 10
     assert np.all(np.diff(np.nonzero(np.diff(f))[0]) >= 17)
 
@@ -115,7 +119,7 @@ def test_departures_tell_the_disturbances_apart(kind):
     else:
         u = (T - 0.41) / 0.1
         r[:, 5] += -40.0 * np.where(np.abs(u) < 0.5, 0.5 * (1 + np.cos(2 * np.pi * u)), 0.0)
-    deps = E.departures(_Problem(levels + r), None, levels, r, [], W, excluded_hz=[(0.0, 40.0)], clock=False)
+    deps = D.departures(_Problem(levels + r), None, levels, r, [], W, excluded_hz=[(0.0, 40.0)], clock=False)
     best = max(deps, key=lambda d: d.test.dbic)
     assert best.family == kind and best.test.significant and best.test.dbic > 0, [(d.label, d.test.dbic) for d in deps]
     if kind == "interference":
@@ -125,20 +129,20 @@ def test_departures_tell_the_disturbances_apart(kind):
     if kind == "pulse":
         assert abs(best.detail["t"] - 0.41) < 0.05
     # none of them on white noise
-    deps0 = E.departures(_Problem(levels + noise), None, levels, noise, [], W, excluded_hz=[(0.0, 40.0)], clock=False)
+    deps0 = D.departures(_Problem(levels + noise), None, levels, noise, [], W, excluded_hz=[(0.0, 40.0)], clock=False)
     assert not any(d.test.significant and d.test.dbic > 0 for d in deps0)
 
 
 def test_excess_tells_noise_from_structure():
     rng = np.random.default_rng(6)
     white = rng.normal(size=(N, K)) * SIG
-    assert not E.excess(white, SIG).any
-    e = E.excess(white + _smooth(rng, 2.0) * (np.arange(K) == 3), SIG)
+    assert not NZ.excess(white, SIG).any
+    e = NZ.excess(white + _smooth(rng, 2.0) * (np.arange(K) == 3), SIG)
     assert list(np.nonzero(e.above)[0]) == [3]
 
 
 def test_a_departure_beyond_the_candidate():
-    """evidence.beyond: crosstalk of channel 1 into channel 4 left in the
+    """departures.beyond: crosstalk of channel 1 into channel 4 left in the
     extended residual stays significant; once the candidate's own columns can
     do the same (a gain on channel 4 of a signal correlated with channel 1),
     it no longer counts; a clock fit on the bound of its search never counts."""
@@ -148,13 +152,13 @@ def test_a_departure_beyond_the_candidate():
     noise = rng.standard_normal((N, K)) * SIG
     r_ext = noise + 0.03 * dep_col
     lr0 = E.lr_test(1.0, 1.0, [dep_col], noise, W, 1, 42, 42)
-    dep = E.Departure("crosstalk", "1 into 4", dataclasses.replace(lr0, p_adj=0.0, dbic=50.0), {}, [dep_col])
-    t = E.beyond(dep, r_ext, W)
+    dep = D.Departure("crosstalk", "1 into 4", dataclasses.replace(lr0, p_adj=0.0, dbic=50.0), {}, [dep_col])
+    t = D.beyond(dep, r_ext, W)
     assert t.significant and t.dbic > 0, t
-    assert not E.beyond(dep, noise, W).significant
+    assert not D.beyond(dep, noise, W).significant
     similar = _col(4, 300.0 * np.sin(2 * np.pi * 3.0 * T + 0.05))   # the candidate's gain column
-    t2 = E.beyond(dep, r_ext, W, J=[similar])
+    t2 = D.beyond(dep, r_ext, W, J=[similar])
     assert t2.dS < 0.2 * t.dS, (t.dS, t2.dS)
     assert dep.counts
-    clock = E.Departure("clock", "at the bound", dep.test, {"eps": E.CLOCK_MAX, "at_bound": True}, [dep_col])
+    clock = D.Departure("clock", "at the bound", dep.test, {"eps": D.CLOCK_MAX, "at_bound": True}, [dep_col])
     assert not clock.counts

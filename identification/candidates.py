@@ -1,0 +1,220 @@
+"""Candidate effects of the closed loop (issue 18): the leading ones of the
+linear ranking fitted through the FMU and re-ranked (`rescore`), then each
+through the likelihood-ratio test, BIC and held-out validation against the
+refitted base (`examine_candidate`), and, if it passes, identified globally for
+its estimates."""
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from .attribution import Attribution, demean_columns
+from .base_polish import BASE_REFINE_EVALS, STEP
+from .catalogue import CATALOGUE, SensorError
+from .evidence import fit_gain, lr_test, project_out
+from .extension import extended_problem, extension_of
+from .holdout import holdout
+from .identify import identify
+from .loop_result import CandidateTest
+from .noise import ALPHA
+from .problem import IdentificationProblem, nrmsd, weighted_residual
+from .refine import refine
+
+log = logging.getLogger(__name__)
+
+RESCORE = 3          # effects fitted through the FMU after the linear ranking ...
+RESCORE_EVALS = 20   # ... with this many evaluations each
+REFINE_EVALS = 80    # simulations of the local refinement (identification.refine) ending each extension
+
+
+def evidence_order(score) -> float:
+    """The order in which candidates are tested: the stronger of the share of f
+    the linear fit credits beyond what the base parameters could still do, and
+    the share removed by the fit through the FMU with the base held. Either
+    alone misleads (a missing effect drags the base optimum away; a fit with the
+    base held can stand in for base parameters that stopped short); neither
+    decides (identification.evidence does)."""
+    return max(score.share, score.share_fit or 0.0)
+
+
+@dataclass
+class Fit:
+    score: object            # HypothesisScore
+    ext: object              # Extension
+    problem: IdentificationProblem
+    stage1: object           # IdentificationResult of the effect alone
+
+
+def budget(evals: int, problem: IdentificationProblem, effect: str) -> int:
+    """At least one step beyond the initial complex (m + 2 points): an effect
+    with many parameters (sensor, per channel) must not end the loop because
+    the budget was set for a smaller design."""
+    need = len(problem.free) + 3
+    if evals < need:
+        log.warning("%s: %d evaluations raised to %d (the complex has %d points)", effect, evals, need, need - 1)
+    return max(evals, need)
+
+
+def rescore(base: IdentificationProblem, x: np.ndarray, att: Attribution, f_base: float, *, n: int, evals: int,
+            seed: int, out: Optional[Path], number: int) -> tuple:
+    """The linear fit ranks; the FMU orders: the top `n` effects are fitted
+    through the FMU (their parameters alone, base held at x, `evals`
+    evaluations from the linear estimate) and re-ranked by evidence_order.
+    Returns (fits, dropped): a candidate whose extension cannot be built (bounds
+    outside the FMU's range, a degenerate fit) or fitted is dropped with its
+    reason, and the next one of the ranking takes its place."""
+    fits, dropped = [], []
+    for sc in att.ranking:
+        if len(fits) >= n:
+            break
+        try:
+            ext = extension_of(sc)
+            prob = extended_problem(base, x, ext)
+            stage1 = dataclasses.replace(prob, free=tuple(ext.free))
+            r = identify(stage1, max_evals=budget(evals, stage1, sc.effect), seed=seed, progress=False,
+                         journal=out / f"round{number}_fit_{sc.effect}.jsonl" if out else None)
+        except Exception as exc:
+            log.warning("round %d: candidate %s dropped: %s", number, sc.effect, exc)
+            dropped.append({"effect": sc.effect, "stage": "fit", "reason": str(exc)[:300]})
+            continue
+        sc.share_fit = max(0.0, (f_base - r.f) / f_base) if f_base > 0 else 0.0
+        fits.append(Fit(sc, ext, prob, r))
+    fits.sort(key=lambda f: -evidence_order(f.score))
+    ranked = [f.score for f in fits]
+    att.ranking = ranked + [sc for sc in att.ranking if all(sc is not r for r in ranked)]
+    return fits, dropped
+
+
+def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0: np.ndarray,
+                      every: bool = False) -> list:
+    """The effect's signature at the base (the attribution's probes; for the
+    sensor those of the channels the extension frees, unless `every`), tared
+    channels demeaned."""
+    from .attribution import _signatures
+    probes = sc.hypothesis.probes
+    if isinstance(CATALOGUE[sc.effect], SensorError) and not every:
+        names = set(ext.free)
+        probes = [p for p in probes if f"effects.sensor.{p.label.replace(' ', '.')}" in names]
+    hyp = dataclasses.replace(sc.hypothesis, probes=probes)
+    G = _signatures(base, x, sim0, hyp, None)
+    demean = np.zeros(sim0.shape[1], bool)
+    if base.tare is not None:
+        demean = np.abs((base.samples - sim0).mean(axis=0)) <= base.tare
+    return [demean_columns(g, demean) for g in G]
+
+
+def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, seed, out, number, progress,
+                      workers, refine_evals, base_refine_evals=BASE_REFINE_EVALS) -> CandidateTest:
+    """The candidate through the tests. What the effect explains is measured
+    where the base cannot move into another valley (the CoR landscape is rough
+    and many-valleyed: a wider search with more parameters finds a lower valley
+    of the *base* and credits the effect with it): the larger of (a) the linear
+    fit of its signature to the refitted base's residual beyond the base
+    columns and (b) the fit of its parameters through the FMU with the base held
+    at its optimum (Levenberg-Marquardt from the rescore's complex), each tested
+    against the noise (evidence.lr_test; the Bonferroni m doubled for taking the
+    larger). Held-out: the base and (b), each refitted on the other blocks.
+    Only a candidate that passes is identified globally (the complex over all
+    parameters, then refine) for its estimates, and the base refitted from that
+    point's base parameters (a better base restarts the round, one_round)."""
+    sc, ext, prob_ext = fit.score, fit.ext, fit.problem
+    x0 = {**prob_ext.x0, **fit.stage1.problem.values(fit.stage1.x)}
+    stage2 = dataclasses.replace(prob_ext, x0=x0)
+    # (b) the effect alone, base held
+    held = dataclasses.replace(prob_ext, free=tuple(ext.free), x0=x0)
+    xh0 = np.array([x0[n] for n in held.free])
+    rh = refine(held, xh0, max_evals=max(refine_evals // 2, 2 * len(held.free) + 2), central=True,
+                channel_weights=w, rel_step=STEP)
+    x_held_full = np.array([held.values(rh.x)[n] for n in stage2.free])
+    sim_h = rh.sim if rh.sim is not None else stage2.simulate(x_held_full)
+    r_h, S_h = weighted_residual(stage2, sim_h, w)
+    refined = {"held": {"S_start": rh.f_start, "S": S_h, "nfev": rh.nfev, "iterations": rh.iterations}}
+    # (a) the linear signature beyond the base columns
+    sim_b = base.simulate(x_b)
+    r_b, _ = weighted_residual(base, sim_b, w)
+    G_raw = signature_columns(base, x_b, sc, ext, sim_b)
+    G = project_out(G_raw, att.base_columns, w)
+    _, fit_lin, S0, S1 = fit_gain(r_b, G, w)
+    kw = dict(q=len(ext.free), m=2 * m, m_effect=m_effect, J=att.base_columns)
+    lr_lin = lr_test(S_b, S_b - (S0 - S1), G, r_b - fit_lin, w, **kw)
+    lr_held = lr_test(S_b, S_h, G, r_h, w, **kw)
+    lr = lr_held if lr_held.T >= lr_lin.T else lr_lin
+    lr.method = ("held" if lr is lr_held else "linear") + "/" + lr.method
+    ho = holdout(base, x_b, stage2, x_held_full, w)
+    why = []
+    if not lr.significant:
+        why.append(f"likelihood ratio not significant (p = {lr.p:.2g}, x {lr.m} hypotheses = {lr.p_adj:.2g} "
+                   f">= {ALPHA:g})")
+    if not lr.dbic > 0:
+        why.append(f"BIC prefers the base (dBIC = {lr.dbic:.1f})")
+    if not ho.gain > 0:
+        why.append(f"no held-out gain ({100 * ho.gain:+.1f}% against the refitted base)")
+    x_e, S_e, sim_e = x_held_full, S_h, sim_h
+    base_alt = None
+    if not why:
+        # the estimates: the extended identification from there (it may walk the base far: a missing
+        # mass drags the CoRs onto their bounds), then the refinement
+        tag = "" if sc.effect == (att.ranking[0].effect if att.ranking else None) else f"_{sc.effect}"
+        st = dataclasses.replace(stage2, x0=stage2.values(x_held_full))
+        res = identify(st, max_evals=budget(max_evals, st, sc.effect), seed=seed + 1, progress=progress,
+                       workers=workers, journal=out / f"round{number}{tag}_journal.jsonl" if out else None)
+        xg = np.asarray(res.x, float)
+        if refine_evals > 0:
+            ref = refine(stage2, xg, max_evals=refine_evals, channel_weights=w, rel_step=STEP)
+            refined["global"] = {"S_start": ref.f_start, "S": ref.f, "nfev": ref.nfev, "iterations": ref.iterations}
+            xg = np.asarray(ref.x, float)
+        try:
+            sim_g = stage2.simulate(xg)
+            r_g, S_g = weighted_residual(stage2, sim_g, w)
+            if S_g < S_e:
+                x_e, S_e, sim_e = xg, S_g, sim_g
+        except Exception as exc:
+            log.warning("%s: the global extension's point cannot be simulated: %s", sc.effect, exc)
+        # the base from the extension's base parameters: if it gets lower there, the base had
+        # stopped in another valley (the round starts again from that base, one_round)
+        vals_e = stage2.values(x_e)
+        xb2 = np.array([vals_e[n] for n in base.free])
+        if base_refine_evals > 0 and not np.allclose(xb2, x_b):
+            try:
+                rb = refine(base, xb2, max_evals=base_refine_evals, central=True, channel_weights=w, rel_step=STEP)
+                if np.isfinite(rb.f):
+                    base_alt = (np.asarray(rb.x, float), float(rb.f))
+            except Exception as exc:
+                log.warning("base refit from the %s extension failed: %s", sc.effect, exc)
+    H_e = nrmsd(stage2.samples, sim_e, stage2.tare)
+    vals = stage2.values(x_e)
+    identified = {n: float(vals[n]) for n in ext.free}
+    identified.update({n: v for n, v in ext.fixed.items()})
+    amp = CATALOGUE[sc.effect].amplitude(vals, base.samples.mean(axis=0))
+    every = signature_columns(base, x_b, sc, ext, sim_b, every=True) \
+        if isinstance(CATALOGUE[sc.effect], SensorError) else G_raw
+    return CandidateTest(sc.effect, sc.label, stage2, x_e, float(np.sum(H_e ** 2)), H_e, S_e, lr, ho, identified,
+                         amp, refined, supported=not why, why_not=why, base_alt=base_alt, signature=every)
+
+
+def sensor_columns(base: Optional[IdentificationProblem], x) -> list:
+    """Every channel's gain and offset at the base (no run beyond the base's):
+    what a sensor fault can do, tared channels demeaned. Empty when the base
+    cannot be simulated."""
+    if base is None or x is None:
+        return []
+    try:
+        sim = base.simulate(np.asarray(x, float))
+    except Exception as exc:
+        log.warning("sensor columns unavailable: %s", exc)
+        return []
+    demean = np.zeros(sim.shape[1], bool)
+    if base.tare is not None:
+        demean = np.abs((base.samples - sim).mean(axis=0)) <= base.tare
+    out = []
+    for j in range(sim.shape[1]):
+        for col in (sim[:, j], np.ones(len(sim))):
+            g = np.zeros_like(sim)
+            g[:, j] = col
+            out.append(demean_columns(g, demean))
+    return out
