@@ -176,6 +176,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=1,
                     help="with --cors-only: identify K records of each measurement together (lss rig --repeat "
                          "0..K-1 of a start-up or start-stop; identification.joint)")
+    ap.add_argument("--staged", action="store_true",
+                    help="identification.staged: the layout-dependent variables by Levenberg-Marquardt, the complex "
+                         "on the CoRs, Levenberg-Marquardt on all ten (--presolve, --max-evals, --refine-evals)")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     args = ap.parse_args(argv)
@@ -189,6 +192,8 @@ def main(argv=None) -> int:
         base = Path(args.work) / protocol
         label = protocol if args.objective == "pointwise" else f"{protocol}, {args.objective}"
         runs = base if args.objective == "pointwise" else base / args.objective   # the set is shared
+        if args.staged:
+            runs, label = runs / "staged", label + ", staged"
         data, out = base / "data", base / "campaign"
         t0, c0 = time.time(), time.process_time()
         fmu = set_fmu(data)
@@ -216,7 +221,7 @@ def main(argv=None) -> int:
         results = run_campaign(data, ["LW"], out, workers=args.workers, max_evals=args.max_evals, seed=args.seed,
                                window=args.window, tare=tare, presolve=args.presolve,
                                refine_evals=args.refine_evals, restarts=args.restarts, uncertainty=True,
-                               progress=True, objective=args.objective)
+                               progress=True, objective=args.objective, staged=args.staged)
         cache = (report["protocols"].get(label) or {}).get("f_truth", {})
         results = [r for r in results if r.get("number") in numbers]
         rows = rows_of(results, data, args.window, tare, cache, args.objective)

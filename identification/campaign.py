@@ -41,6 +41,7 @@ class Task:
     refine_evals: int = 0   # identify(refine_evals=...): Levenberg-Marquardt after the complex
     uncertainty: bool = False   # identify(uncertainty=...): an interval per free variable
     objective: str = "pointwise"  # from_measurement(objective=...)
+    staged: bool = False         # identify(staged=...): identification.staged
 
     @property
     def key(self) -> str:
@@ -68,7 +69,7 @@ def run_task(task: Task) -> dict:
     try:
         res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path,
                        progress=False, restarts=task.restarts, presolve=task.presolve,
-                       refine_evals=task.refine_evals, uncertainty=task.uncertainty)
+                       refine_evals=task.refine_evals, uncertainty=task.uncertainty, staged=task.staged)
     finally:
         problem.sim.close()
     out = res.to_dict()
@@ -83,7 +84,8 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
                  scheduler: Optional[str] = None, max_evals: int = 5000, seed: int = 0,
                  window: Optional[float] = None, settle: Optional[float] = None, free: Optional[tuple] = None,
                  progress: bool = True, client=None, tare: bool = False, restarts: int = 0, presolve: int = 0,
-                 refine_evals: int = 0, uncertainty: bool = False, objective: str = "pointwise") -> list[dict]:
+                 refine_evals: int = 0, uncertainty: bool = False, objective: str = "pointwise",
+                 staged: bool = False) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
     from lss_fmu.design import parse_model
     from lss_fmu.measurement import find_measurements
@@ -96,7 +98,7 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
     if not folders:
         raise FileNotFoundError(f"{data_dir} holds no measurement (no meta.json in it or below)")
     tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts), int(presolve),
-                  int(refine_evals), bool(uncertainty), objective) for p in folders for m in models]
+                  int(refine_evals), bool(uncertainty), objective, bool(staged)) for p in folders for m in models]
     twice = sorted({t.key for t in tasks if sum(u.key == t.key for u in tasks) > 1})
     if twice:  # results are filed by folder name
         raise ValueError(f"{data_dir}: measurement folders share a name ({', '.join(twice[:5])}); a campaign "
@@ -106,7 +108,7 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
                                               "settle": settle, "free": list(free) if free else None,
                                               "tare": tare, "restarts": int(restarts), "presolve": int(presolve),
                                               "refine_evals": int(refine_evals), "uncertainty": bool(uncertainty),
-                                              "objective": objective,
+                                              "objective": objective, "staged": bool(staged),
                                               "tasks": [t.key for t in tasks]})
     todo = [t for t in tasks if not t.result_path.exists()]
     bar = None

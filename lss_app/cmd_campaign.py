@@ -28,6 +28,9 @@ def register(sub, common) -> None:
                     help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
     ap.add_argument("--refine-evals", type=int, default=0,
                     help="simulations of the local refinement after the complex (0: none)")
+    ap.add_argument("--staged", action="store_true",
+                    help="the layout-dependent variables by Levenberg-Marquardt first, the complex on the CoRs, "
+                         "then Levenberg-Marquardt on everything (identification.staged)")
     ap.add_argument("--tare", action="store_true",
                     help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
@@ -47,7 +50,8 @@ def run_campaign(args) -> int:
                        scheduler=args.scheduler, max_evals=args.max_evals, seed=args.seed,
                        window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
                        tare=args.tare, restarts=args.restarts, presolve=args.presolve,
-                       refine_evals=args.refine_evals, uncertainty=True, objective=args.objective)
+                       refine_evals=args.refine_evals, uncertainty=True, objective=args.objective,
+                       staged=args.staged)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

@@ -33,6 +33,10 @@ def register(sub, common) -> None:
                          "sensor's declared noise, for transient records (docs/identification.md)")
     ap.add_argument("--presolve", type=int, default=0,
                     help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
+    ap.add_argument("--staged", action="store_true",
+                    help="Levenberg-Marquardt on the layout-dependent variables first (--presolve simulations, "
+                         "default 80), the complex on the CoRs alone, then Levenberg-Marquardt on everything "
+                         "(identification.staged; pointwise or likelihood objective)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
     ap.add_argument("--tare", action="store_true",
@@ -72,7 +76,7 @@ def run(args) -> int:
                         filename=str(out / "identify.log"))
     res = identify(problem, max_evals=args.max_evals, seed=args.seed, journal=out / "journal.jsonl",
                    progress=not args.no_progress, workers=args.workers, restarts=args.restarts,
-                   refine_evals=args.refine_evals, uncertainty=True, presolve=args.presolve)
+                   refine_evals=args.refine_evals, uncertainty=True, presolve=args.presolve, staged=args.staged)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{meas.id}, model {model}"
     x0, x = (res.x0, res.x) if problem is first else (problem.part_x(0, res.x0), problem.part_x(0, res.x))
