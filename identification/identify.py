@@ -226,7 +226,7 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
     staged.STAGE_EVALS), the complex on the CoRs alone (`max_evals`), then
     Levenberg-Marquardt on everything (`refine_evals`); with the likelihood
     objective, a result above the noise goes on with the complex over
-    everything from there (4 `max_evals`, staged.FALLBACK_RESTARTS restarts)."""
+    everything (identify from the start values, 4 `max_evals`)."""
     if int(restarts) < 0:
         raise ValueError(f"restarts = {restarts}: must be >= 0")
     if staged:

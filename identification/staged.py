@@ -18,8 +18,10 @@ The ordering is not always right: where the CoRs at their start values put
 the six in another valley (layout 7's m20: the first stage walks the gain
 K_I onto its bound), the stages end far above the noise. With the
 likelihood objective that is known (the noise is declared: `at_noise`), and
-`fallback_evals` then runs the complex over all ten from the best point
-(identify with `restarts`), which is what reaches the noise there. Only for
+`fallback_evals` then runs identify's own pipeline from the start values
+(a complex over the six, then over all ten with restarts, then the
+refinement), which is what reaches the noise there; the better result is
+kept. Only for
 an objective that is a sum of squares (problem.LINEARISABLE).
 """
 from __future__ import annotations
@@ -40,6 +42,7 @@ log = logging.getLogger(__name__)
 
 STAGE_EVALS = 80      # simulations of the first Levenberg-Marquardt (the layout-dependent variables)
 FALLBACK_RESTARTS = 2
+FALLBACK_PRESOLVE = 150   # evaluations of the fallback's first complex over the six (identify(presolve=...))
 
 
 def at_noise(problem, f: float) -> Optional[bool]:
@@ -60,8 +63,8 @@ def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, sta
     budget over the CoRs, `stage_evals` the first and `refine_evals` the last
     Levenberg-Marquardt's. Returns an identify.IdentificationResult of the
     whole problem (`presolved`: the first stage, `refined`: the last).
-    `fallback_evals` > 0: if the stages end above the noise (at_noise), the
-    complex over everything from their best point with this budget and
+    `fallback_evals` > 0: if the stages end above the noise (at_noise),
+    identify from the start values with FALLBACK_PRESOLVE, this budget and
     FALLBACK_RESTARTS restarts, then the same refinement; the better result
     is returned."""
     from .identify import REFINE_STEP, IdentificationResult, _local, _safe_H, identify
@@ -124,9 +127,11 @@ def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, sta
     if fallback_evals > 0 and at_noise(problem, f) is False:
         log.info("%s: the stages end at f = %.4g, above the noise: the complex over everything", problem.name, f)
         side = Path(journal).with_suffix(".fallback.jsonl") if journal else None
-        full = identify(dataclasses.replace(problem, x0=problem.values(x)), max_evals=int(fallback_evals),
-                        seed=seed, journal=side, progress=progress, workers=workers, restarts=FALLBACK_RESTARTS,
-                        refine_evals=int(refine_evals), uncertainty=uncertainty)
+        # from the start values, not the stages' point: that sits in the wrong valley, and the complex
+        # (its first point the start) with a presolve of the six is what reaches the noise there
+        full = identify(problem, max_evals=int(fallback_evals), seed=seed, journal=side, progress=progress,
+                        workers=workers, restarts=FALLBACK_RESTARTS, refine_evals=int(refine_evals),
+                        uncertainty=uncertainty, presolve=FALLBACK_PRESOLVE)
         used = out.nfev + full.nfev
         if full.f < f:
             out = dataclasses.replace(full, x0=out.x0, f0=f0, H0=out.H0, nfev=used, presolved=pre,
