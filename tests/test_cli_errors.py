@@ -72,6 +72,8 @@ CASES = [
      ["max-evals"]),
     ("identify negative restarts", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--restarts", "-1"],
      ["--restarts -1"]),
+    ("identify staged statistics", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--staged",
+                                    "--objective", "statistics"], ["staged", "statistics objective"]),
     ("campaign negative restarts", ["campaign", "{root}/good", "--models", "HW", "--out", "{root}/c",
                                     "--restarts", "-2"], ["restarts = -2"]),
     ("campaign missing folder", ["campaign", "{root}/nowhere", "--models", "HW", "--out", "{root}/c"],
