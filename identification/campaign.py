@@ -41,7 +41,7 @@ class Task:
     refine_evals: int = 0   # identify(refine_evals=...): Levenberg-Marquardt after the complex
     uncertainty: bool = False   # identify(uncertainty=...): an interval per free variable
     objective: str = "pointwise"  # from_measurement(objective=...)
-    staged: bool = False         # identify(staged=...): identification.staged
+    staged: bool = False         # identification.staged instead of identify
 
     @property
     def key(self) -> str:
@@ -59,17 +59,17 @@ class Task:
 def run_task(task: Task) -> dict:
     """One identification (in a worker); writes its result file atomically."""
     from lss_fmu.measurement import load_measurement
-    from .identify import identify
     from .problem import from_measurement
+    from .staged import run
     meas = load_measurement(task.measurement)
     problem = from_measurement(meas, task.model, free=task.free, window=task.window, settle=task.settle,
                                tare=task.tare, objective=task.objective)
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
     c0 = time.process_time()
     try:
-        res = identify(problem, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path,
-                       progress=False, restarts=task.restarts, presolve=task.presolve,
-                       refine_evals=task.refine_evals, uncertainty=task.uncertainty, staged=task.staged)
+        res = run(problem, task.staged, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path,
+                  progress=False, restarts=task.restarts, presolve=task.presolve, refine_evals=task.refine_evals,
+                  uncertainty=task.uncertainty)
     finally:
         problem.sim.close()
     out = res.to_dict()

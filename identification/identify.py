@@ -184,7 +184,7 @@ RESTART_WIDTH = 0.15   # half-width of a restart's box, as a share of each varia
 def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
              journal: Optional[Path] = None, progress: bool = True, f_tol: float = 1e-6,
              x_tol: float = 1e-4, workers: int = 1, restarts: int = 0, refine_evals: int = 0,
-             uncertainty: bool = False, presolve: int = 0, staged: bool = False) -> IdentificationResult:
+             uncertainty: bool = False, presolve: int = 0) -> IdentificationResult:
     """Complex-RF on the problem (the parallel variant with `workers` > 1,
     each worker process with its own FMU instance), then optionally a local
     refinement and the intervals of the result.
@@ -219,22 +219,10 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
     limits them, over all restarts); with workers, `nfev_total` adds the
     speculative ones it discarded. An exception of the objective, in this
     process or a worker, is a bad point with a logged line, never the end of
-    the run.
-
-    `staged`: identification.staged instead: Levenberg-Marquardt on the
-    layout-dependent variables (`presolve` simulations, default
-    staged.STAGE_EVALS), the complex on the CoRs alone (`max_evals`), then
-    Levenberg-Marquardt on everything (`refine_evals`); with the likelihood
-    objective, a result above the noise goes on with the complex over
-    everything (identify from the start values, 4 `max_evals`)."""
+    the run. (The ten-variable problem ordered the other way:
+    identification.staged.)"""
     if int(restarts) < 0:
         raise ValueError(f"restarts = {restarts}: must be >= 0")
-    if staged:
-        from .staged import STAGE_EVALS, identify_staged
-        return identify_staged(problem, max_evals=max_evals, stage_evals=presolve or STAGE_EVALS,
-                               refine_evals=refine_evals, restarts=restarts, seed=seed, journal=journal,
-                               progress=progress, workers=workers, uncertainty=uncertainty,
-                               fallback_evals=4 * int(max_evals))
     t0 = time.time()
     pre = _presolve(problem, presolve, seed, journal, progress, f_tol, x_tol, workers)
     if pre is not None:

@@ -56,15 +56,28 @@ def at_noise(problem, f: float) -> Optional[bool]:
     return bool(f <= m * (1.0 + AT_NOISE_MARGIN) + AT_NOISE_Z * np.sqrt(2.0 * m / n))
 
 
+def run(problem: IdentificationProblem, staged: bool = False, **kw):
+    """identify(problem, **kw), or identify_staged with the same budgets
+    (`presolve`: the first stage's simulations, default STAGE_EVALS): the one
+    door of the campaign and the command line."""
+    from .identify import identify
+    if not staged:
+        return identify(problem, **kw)
+    presolve = kw.pop("presolve", 0)
+    return identify_staged(problem, stage_evals=presolve or STAGE_EVALS, **kw)
+
+
 def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, stage_evals: int = STAGE_EVALS,
                     refine_evals: int = 200, restarts: int = 0, seed=0, journal: Optional[Path] = None,
-                    progress: bool = True, workers: int = 1, uncertainty: bool = False, fallback_evals: int = 0):
+                    progress: bool = True, workers: int = 1, uncertainty: bool = False,
+                    fallback_evals: Optional[int] = None):
     """The three stages of the module docstring; `max_evals` is the complex's
     budget over the CoRs, `stage_evals` the first and `refine_evals` the last
     Levenberg-Marquardt's. Returns an identify.IdentificationResult of the
     whole problem (`presolved`: the first stage, `refined`: the last).
-    `fallback_evals` > 0: if the stages end above the noise (at_noise),
-    identify from the start values with FALLBACK_PRESOLVE, this budget and
+    `fallback_evals` (default 4 `max_evals`; 0: none): if the stages end
+    above the noise (at_noise), identify from the start values with
+    FALLBACK_PRESOLVE, this budget and
     FALLBACK_RESTARTS restarts, then the same refinement; the better result
     is returned."""
     from .identify import REFINE_STEP, IdentificationResult, _local, _safe_H, identify
@@ -72,6 +85,8 @@ def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, sta
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
         raise ValueError(f"staged identification: the {problem.objective} objective is not a sum of squares "
                          f"(use one of {', '.join(LINEARISABLE)})")
+    if fallback_evals is None:
+        fallback_evals = 4 * int(max_evals)
     for name, v in (("max_evals", max_evals), ("stage_evals", stage_evals), ("refine_evals", refine_evals),
                     ("restarts", restarts), ("fallback_evals", fallback_evals)):
         if int(v) < 0:

@@ -46,7 +46,7 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from identification.identify import identify
+    from identification.staged import run as identify_or_staged
     from identification.problem import from_measurement
     from lss_fmu.atomic import write_json_atomic
     from lss_fmu.design import parse_free, parse_model
@@ -74,9 +74,10 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "identify.log"))
-    res = identify(problem, max_evals=args.max_evals, seed=args.seed, journal=out / "journal.jsonl",
-                   progress=not args.no_progress, workers=args.workers, restarts=args.restarts,
-                   refine_evals=args.refine_evals, uncertainty=True, presolve=args.presolve, staged=args.staged)
+    res = identify_or_staged(problem, args.staged, max_evals=args.max_evals, seed=args.seed,
+                             journal=out / "journal.jsonl", progress=not args.no_progress, workers=args.workers,
+                             restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
+                             presolve=args.presolve)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{meas.id}, model {model}"
     x0, x = (res.x0, res.x) if problem is first else (problem.part_x(0, res.x0), problem.part_x(0, res.x))

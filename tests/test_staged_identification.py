@@ -15,10 +15,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.identify import identify
 from identification.problem import from_measurement
 from identification.staged import at_noise, identify_staged
-from lss_fmu.design import CORS
 from lss_fmu.rig import load_truth, true_design_values
 
 WINDOW = 2.0
@@ -37,7 +35,7 @@ def test_ten_free_staged_reaches_the_noise_and_the_cors(start_stop_layout1):
     xt = np.array([truth[n] for n in p.free])
     try:
         f_truth = p(xt)
-        res = identify(p, staged=True, max_evals=120, refine_evals=200, uncertainty=True, seed=0, progress=False)
+        res = identify_staged(p, max_evals=120, refine_evals=200, uncertainty=True, seed=0, progress=False)
     finally:
         p.sim.close()
     assert at_noise(p, f_truth)
