@@ -37,23 +37,13 @@ import numpy as np
 from lss_fmu.design import LAYOUT_DEPENDENT
 
 from .problem import LINEARISABLE, IdentificationProblem
+from .uncertainty import at_noise
 
 log = logging.getLogger(__name__)
 
 STAGE_EVALS = 80      # simulations of the first Levenberg-Marquardt (the layout-dependent variables)
 FALLBACK_RESTARTS = 2
 FALLBACK_PRESOLVE = 150   # evaluations of the fallback's first complex over the six (identify(presolve=...))
-
-
-def at_noise(problem, f: float) -> Optional[bool]:
-    """Whether f (the likelihood objective: sum over channels of mean (r / sigma)^2)
-    is where only the declared noise is left (uncertainty.fit_at_noise's test);
-    None for the other objectives."""
-    from .uncertainty import AT_NOISE_MARGIN, AT_NOISE_Z
-    if getattr(problem, "objective", "pointwise") != "likelihood":
-        return None
-    n, m = np.shape(problem.samples)
-    return bool(f <= m * (1.0 + AT_NOISE_MARGIN) + AT_NOISE_Z * np.sqrt(2.0 * m / n))
 
 
 def run(problem: IdentificationProblem, staged: bool = False, **kw):

@@ -194,6 +194,13 @@ def fit_at_noise(problem, r: np.ndarray) -> Optional[bool]:
     interval is claimed. None for the other objectives (no noise declared)."""
     if getattr(problem, "objective", "pointwise") != "likelihood" or getattr(problem, "noise", None) is None:
         return None
-    n, m = r.shape
-    chi = float(np.sum(np.mean(r ** 2, axis=0) / np.asarray(problem.noise, float) ** 2))
-    return bool(chi <= m * (1.0 + AT_NOISE_MARGIN) + AT_NOISE_Z * np.sqrt(2.0 * m / n))
+    return at_noise(problem, float(np.sum(np.mean(r ** 2, axis=0) / np.asarray(problem.noise, float) ** 2)))
+
+
+def at_noise(problem, f: float) -> Optional[bool]:
+    """The test of fit_at_noise on f itself (the likelihood objective's f is
+    that sum); None for the other objectives."""
+    if getattr(problem, "objective", "pointwise") != "likelihood":
+        return None
+    n, m = np.shape(problem.samples)
+    return bool(f <= m * (1.0 + AT_NOISE_MARGIN) + AT_NOISE_Z * np.sqrt(2.0 * m / n))

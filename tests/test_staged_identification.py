@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from identification.problem import from_measurement
-from identification.staged import at_noise, identify_staged
+from identification.staged import identify_staged
+from identification.uncertainty import at_noise
 from lss_fmu.rig import load_truth, true_design_values
 
 WINDOW = 2.0
