@@ -194,14 +194,14 @@ def rig_problem(case: dict):
         {"sensor_offset_std": sensor.get("force_offset_std_N"), "noise_std": sensor.get("force_noise_std_N")}
 
 
-def run_case(case: dict) -> dict:
+def run_case(case: dict, budget: dict = BUDGET) -> dict:
     from identification.close_loop import close_loop
     t0, c0 = time.time(), time.process_time()
     if case.get("source") == "rig":
         problem, truth, kw = rig_problem(case)
     else:
         problem, truth, kw = synthetic_problem(case)
-    res = close_loop(problem, seed=0, **BUDGET, **kw)
+    res = close_loop(problem, seed=0, **budget, **kw)
     rounds = []
     for r in res.rounds:
         ev = r.evidence
@@ -220,7 +220,18 @@ def run_case(case: dict) -> dict:
     return {**case, "truth": truth, "found": res.found, "outcome": res.outcome, "verdict": res.verdict,
             "rounds": rounds, "layout": problem.layout, "protocol": problem.protocol.name,
             "samples": len(problem.times), "free": list(problem.free),
-            "wall_s": time.time() - t0, "cpu_s": time.process_time() - c0, "budget": BUDGET}
+            "wall_s": time.time() - t0, "cpu_s": time.process_time() - c0, "budget": budget}
+
+
+def parse_budget(text: str) -> dict:
+    """BUDGET with 'key=int,...' on top (a comparison of budgets; keys as close_loop's)."""
+    out = dict(BUDGET)
+    for item in filter(None, (text or "").split(",")):
+        key, _, val = item.partition("=")
+        if key not in BUDGET or not val.strip().isdigit():
+            raise SystemExit(f"--budget: {item!r} is not KEY=INTEGER with KEY one of {', '.join(BUDGET)}")
+        out[key] = int(val)
+    return out
 
 
 def cmd_run(args) -> int:
@@ -231,14 +242,15 @@ def cmd_run(args) -> int:
     if args.ids:   # these cases, in this order (a short run takes the most telling first)
         by_id = {c["id"]: c for c in todo}
         todo = [by_id[i] for i in args.ids.split(",") if i in by_id]
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    budget, results = parse_budget(args.budget), Path(args.results)
+    results.mkdir(parents=True, exist_ok=True)
     done = 0
     for case in todo:
-        path = RESULTS / f"{case['id']}.json"
+        path = results / f"{case['id']}.json"
         if path.is_file():
             continue
         try:
-            res = run_case(case)
+            res = run_case(case, budget)
         except Exception as exc:   # a case that cannot run is recorded, the benchmark goes on
             import traceback
             res = {**case, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
@@ -252,8 +264,8 @@ def cmd_run(args) -> int:
 
 
 # ------------------------------------------------------------------------------------------ the report
-def load_results() -> list:
-    return [json.loads(p.read_text()) for p in sorted(RESULTS.glob("*.json"))]
+def load_results(folder: Path = RESULTS) -> list:
+    return [json.loads(p.read_text()) for p in sorted(Path(folder).glob("*.json"))]
 
 
 def summarise(results: list) -> dict:
@@ -338,9 +350,13 @@ def table(summary: dict) -> str:
 
 
 def cmd_report(args) -> int:
-    s = summarise(load_results())
-    write_json_atomic(SUMMARY, s)
-    figure(s, Path(args.figure))
+    s = summarise(load_results(args.results))
+    stored = Path(args.results).resolve() == RESULTS.resolve()
+    if stored:   # the stored set's summary and figure; another folder only prints (or --figure)
+        write_json_atomic(SUMMARY, s)
+    fig = args.figure or (ROOT / "docs" / "figures" / "close_loop_rates.png" if stored else None)
+    if fig:
+        figure(s, Path(fig))
     print(json.dumps({k: s[k] for k in ("clean", "out_of_catalogue", "errors", "cpu_s")}, indent=1))
     print(table(s))
     return 0
@@ -357,9 +373,13 @@ def main(argv=None) -> int:
     r.add_argument("--limit", type=int, default=0, help="stop after this many new cases (0: all)")
     r.add_argument("--ids", default=None, help="only these case ids, in this order")
     r.add_argument("--syn-clean", type=int, default=SYN_CLEAN, help="synthetic clean records")
+    r.add_argument("--budget", default="", help="KEY=N,... on top of BUDGET (e.g. base_evals=200); with --results "
+                                                "elsewhere, so the stored set stays one budget's")
+    r.add_argument("--results", default=str(RESULTS), help="folder of the case files")
     r.set_defaults(run=cmd_run)
     p = sub.add_parser("report")
-    p.add_argument("--figure", default=str(ROOT / "docs" / "figures" / "close_loop_rates.png"))
+    p.add_argument("--figure", default=None, help="default: docs/figures/close_loop_rates.png for the stored set")
+    p.add_argument("--results", default=str(RESULTS), help="folder of the case files")
     p.set_defaults(run=cmd_report)
     args = ap.parse_args(argv)
     return args.run(args)

@@ -110,7 +110,7 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
     layout-dependent variables at their true values, the four CoRs free, the
     same pipeline. One result file per measurement, written atomically (a
     stopped run resumes)."""
-    from identification.identify import identify
+    from identification.staged import run
     (out / "journals").mkdir(parents=True, exist_ok=True)
     rows = []
     for n in numbers:
@@ -127,14 +127,14 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
             p = parts[0] if len(parts) == 1 else JointProblem(parts)
             c0 = time.process_time()
             try:
-                res = identify(p, max_evals=args.max_evals, seed=args.seed, progress=False,
-                               restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
-                               journal=out / "journals" / f"m{n:02d}.jsonl")
+                res = run(p, False, args.shrink, max_evals=args.max_evals, seed=args.seed, progress=False,
+                          restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
+                          journal=out / "journals" / f"m{n:02d}.jsonl")
                 r = res.to_dict()
                 r.update({"cpu_s": time.process_time() - c0, "number": n, "layout": m.layout,
                           "measurement": res.problem.name, "measurement_dir": str(data / f"m{n:02d}"),
                           "records": len(parts)})
-                r["f_truth"] = float(p(_truth_x(truth, p.free)))
+                r["f_truth"] = float(res.problem(_truth_x(truth, res.problem.free)))   # at the window used
             finally:
                 for q in parts:
                     q.sim.close()
@@ -179,6 +179,8 @@ def main(argv=None) -> int:
     ap.add_argument("--staged", action="store_true",
                     help="identification.staged: the layout-dependent variables by Levenberg-Marquardt, the complex "
                          "on the CoRs, Levenberg-Marquardt on all ten (--presolve, --max-evals, --refine-evals)")
+    ap.add_argument("--shrink", action="store_true",
+                    help="identification.windowing: shorter windows (1.5, 1.2, 1.0 s) while a CoR is rough")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     args = ap.parse_args(argv)
@@ -206,8 +208,10 @@ def main(argv=None) -> int:
                              progress=True, repeat=k, log=lambda msg: print(msg, file=sys.stderr), fmu=fmu)
             if args.repeats > 1:
                 label += f", {args.repeats} records"
-            results = cors_only(data, runs / ("cors_only" if args.repeats == 1 else f"cors_only_k{args.repeats}"),
-                                numbers, args, tare)
+            folder = "cors_only" if args.repeats == 1 else f"cors_only_k{args.repeats}"
+            if args.shrink:
+                folder, label = folder + "_shrink", label + ", shorter windows"
+            results = cors_only(data, runs / folder, numbers, args, tare)
             cache = {r["measurement"]: r["f_truth"] for r in results}
             rows = rows_of(results, data, args.window, tare, cache, args.objective)
             entry = {"rows": rows, "summary": summary(rows), "wall_s": time.time() - t0}

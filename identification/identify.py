@@ -153,6 +153,7 @@ class IdentificationResult:
     refined: Optional[dict] = None   # the local refinement: f before and after, simulations
     presolved: Optional[dict] = None  # the first stage (identify(presolve=...)): f0, f, evaluations, values
     intervals: Optional[list] = None  # identification.uncertainty.Interval per free variable
+    windows: Optional[list] = None   # identification.windowing: every window tried, its f and troubles
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -171,7 +172,7 @@ class IdentificationResult:
             "rounds": self.nrounds, "workers": self.workers, "restarts": self.restarts,
             "seconds": self.seconds, "window_s": float(p.times[-1]),
             "protocol": p.protocol.to_meta(), "tolerance": p.tolerance,
-            "refined": self.refined, "presolved": self.presolved,
+            "refined": self.refined, "presolved": self.presolved, "windows": self.windows,
             "interval": None if self.intervals is None else {
                 symbol(iv.name): iv.to_dict() for iv in self.intervals},
         }

@@ -46,11 +46,15 @@ FALLBACK_RESTARTS = 2
 FALLBACK_PRESOLVE = 150   # evaluations of the fallback's first complex over the six (identify(presolve=...))
 
 
-def run(problem: IdentificationProblem, staged: bool = False, **kw):
+def run(problem: IdentificationProblem, staged: bool = False, shrink: bool = False, **kw):
     """identify(problem, **kw), or identify_staged with the same budgets
     (`presolve`: the first stage's simulations, default STAGE_EVALS): the one
-    door of the campaign and the command line."""
+    door of the campaign and the command line. `shrink`: either of them
+    through identification.windowing (shorter windows while a CoR is rough)."""
     from .identify import identify
+    if shrink:
+        from .windowing import identify_windowed
+        return identify_windowed(problem, lambda q, **k: run(q, staged, **k), **kw)
     if not staged:
         return identify(problem, **kw)
     presolve = kw.pop("presolve", 0)
