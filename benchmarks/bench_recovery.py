@@ -196,6 +196,8 @@ def main(argv=None) -> int:
         runs = base if args.objective == "pointwise" else base / args.objective   # the set is shared
         if args.staged:
             runs, label = runs / "staged", label + ", staged"
+        if args.shrink and not args.cors_only:
+            runs, label = runs / "shrink", label + ", shorter windows"
         data, out = base / "data", base / "campaign"
         t0, c0 = time.time(), time.process_time()
         fmu = set_fmu(data)
@@ -225,7 +227,8 @@ def main(argv=None) -> int:
         results = run_campaign(data, ["LW"], out, workers=args.workers, max_evals=args.max_evals, seed=args.seed,
                                window=args.window, tare=tare, presolve=args.presolve,
                                refine_evals=args.refine_evals, restarts=args.restarts, uncertainty=True,
-                               progress=True, objective=args.objective, staged=args.staged)
+                               progress=True, objective=args.objective, staged=args.staged,
+                               shrink=args.shrink)
         cache = (report["protocols"].get(label) or {}).get("f_truth", {})
         results = [r for r in results if r.get("number") in numbers]
         rows = rows_of(results, data, args.window, tare, cache, args.objective)

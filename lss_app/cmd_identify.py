@@ -39,6 +39,9 @@ def register(sub, common) -> None:
                          "(identification.staged; pointwise or likelihood objective)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
+    ap.add_argument("--shrink", action="store_true",
+                    help="when a CoR is rough at the optimum (a record that turns chaotic) or the fit stays above "
+                         "the noise, identify again on the first 1.5, 1.2, 1.0 s (identification.windowing)")
     ap.add_argument("--tare", action="store_true",
                     help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
@@ -74,7 +77,7 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "identify.log"))
-    res = identify_or_staged(problem, args.staged, max_evals=args.max_evals, seed=args.seed,
+    res = identify_or_staged(problem, args.staged, args.shrink, max_evals=args.max_evals, seed=args.seed,
                              journal=out / "journal.jsonl", progress=not args.no_progress, workers=args.workers,
                              restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
                              presolve=args.presolve)
