@@ -101,3 +101,9 @@ def test_above_the_noise_is_a_trouble_and_intervals_are_needed(start_stop_layout
     assert troubles(dataclasses.replace(_result(p, p.x0_vector(), 7.0), intervals=None)) == []
     with pytest.raises(ValueError, match="uncertainty=True"):
         identify_windowed(p, StandIn(1.0))
+
+
+def test_a_campaign_that_shrinks_needs_the_intervals(tmp_path):
+    from identification.campaign import run_campaign
+    with pytest.raises(ValueError, match="shrink needs uncertainty"):
+        run_campaign(tmp_path, ["LW"], tmp_path / "out", shrink=True, uncertainty=False, progress=False)
