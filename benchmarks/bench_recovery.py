@@ -65,7 +65,8 @@ def rows_of(results: list, data: Path, window, tare: bool, cache: dict, objectiv
         row = {"measurement": key, "number": r.get("number"), "layout": r.get("layout"), "f": r["f"],
                "f_truth": cache[key], "ratio": r["f"] / cache[key] if cache[key] > 0 else float("nan"),
                "cpu_s": r.get("cpu_s"), "nfev": r["nfev"], "refined": r.get("refined"),
-               "protocol": (r.get("protocol") or {}).get("name", "steady")}
+               "protocol": (r.get("protocol") or {}).get("name", "steady"),
+               "window_s": r.get("window_s"), "windows": [w["window_s"] for w in r.get("windows") or []]}
         for k in CORS:
             s = SYMBOL[k]
             true = truth["cor"][s]
