@@ -92,17 +92,26 @@ def summary(rows: list) -> dict:
 
 
 def table(rows: list) -> str:
-    head = ("| meas | layout | f / f(truth) | e_JA err | e_SW err | e_RW err | e_JR err | intervals cover "
-            "(JA/SW/RW) | CPU s |")
+    """Markdown: per record f / f(truth), each CoR's error with its interval's
+    sd (n.i.: reported not identifiable), whether e_JA, e_SW, e_RW's intervals
+    hold the truth, the window used (and the ones tried before it), CPU."""
+    head = ("| meas | layout | f / f(truth) | e_JA err (sd) | e_SW err (sd) | e_RW err (sd) | e_JR err | intervals "
+            "cover (JA/SW/RW) | window s | CPU s |")
     lines = [head, "|" + "---|" * 10]
     for q in rows:
-        def cell(s):
-            e = q[s]["error"]
-            mark = "" if q[s]["identifiable"] is not False else " (n.i.)"
-            return f"{e:+.3f}{mark}"
+        def cell(s, sd=True):
+            e, iv = q[s]["error"], q[s]["interval"] or {}
+            if q[s]["identifiable"] is False:
+                return f"{e:+.3f} n.i."
+            return f"{e:+.3f} ({iv.get('sd', float('nan')):.3f})" if sd else f"{e:+.3f}"
         cov = "/".join("y" if q[s]["covers"] else "n" for s in ("e_JA", "e_SW", "e_RW"))
-        lines.append(f"| {q['number']} | {q['layout']} | {q['ratio']:.2f} | {cell('e_JA')} | {cell('e_SW')} | "
-                     f"{cell('e_RW')} | {cell('e_JR')} | {cov} | {q['cpu_s'] or 0:.0f} |")
+        tried = q.get("windows") or []
+        win = "" if q.get("window_s") is None else f"{q['window_s']:.2g}"
+        if len(tried) > 1:
+            win += " (" + ", ".join(f"{w:.2g}" for w in tried[:-1]) + ")"
+        lines.append(f"| {q['number']} | {q['layout'].replace('layout', '')} | {q['ratio']:.3f} | {cell('e_JA')} | "
+                     f"{cell('e_SW')} | {cell('e_RW')} | {cell('e_JR', False)} | {cov} | {win} | "
+                     f"{q['cpu_s'] or 0:.0f} |")
     return "\n".join(lines)
 
 
@@ -184,7 +193,12 @@ def main(argv=None) -> int:
                     help="identification.windowing: shorter windows (1.5, 1.2, 1.0 s) while a CoR is rough")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
+    ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
     args = ap.parse_args(argv)
+    if args.table:
+        for label, entry in json.loads(Path(args.json).read_text())["protocols"].items():
+            print(f"## {label}\n\n{table(entry['rows'])}\n\n{json.dumps(entry['summary'], indent=1)}\n")
+        return 0
     numbers = parse_numbers(args.measurements)
     tare = not args.no_tare
     report = {"command": " ".join(sys.argv), "settings": vars(args), "protocols": {}}
