@@ -162,3 +162,37 @@ def test_a_departure_beyond_the_candidate():
     assert dep.counts
     clock = D.Departure("clock", "at the bound", dep.test, {"eps": D.CLOCK_MAX, "at_bound": True}, [dep_col])
     assert not clock.counts
+
+
+class _Model:
+    """A stand-in problem: the measured samples and a model run (simulate) of them."""
+
+    def __init__(self, samples, run):
+        self.samples, self.tare, self._run = samples, None, run
+
+    def simulate(self, x):
+        return self._run
+
+
+def test_an_effect_must_matter_at_its_estimate():
+    """candidates.switched_off: the extension's point with the effect off,
+    against the extension. A fit whose fall came from the base parameters
+    (the effect at a negligible amplitude) does not count; one whose effect
+    carries the fall does."""
+    from identification.candidates import switched_off
+    rng = np.random.default_rng(11)
+    g = _col(2, 10.0 * np.sin(2 * np.pi * 7.0 * T))
+    base_run = np.zeros((N, K))
+    noise = rng.standard_normal((N, K)) * SIG
+    kw = dict(q=1, m=10, m_effect=1, J=())
+    # the record holds the effect: the extension's run has it, the base's does not
+    samples = base_run + 3.0 * g + noise
+    ext_run = base_run + 3.0 * g
+    S_e = float(np.sum((samples - ext_run) ** 2 * W))
+    on = switched_off(_Model(samples, base_run), None, _Model(samples, ext_run), ext_run, S_e, [g], W, kw)
+    assert on["matters"] and on["dS"] > 100 and on["p_adj"] < 1e-6, on
+    # the effect at 1e-9 of that: switched off, nothing changes
+    ext_run = base_run + 3e-9 * g
+    S_e = float(np.sum((samples - ext_run) ** 2 * W))
+    off = switched_off(_Model(samples, base_run), None, _Model(samples, ext_run), ext_run, S_e, [g], W, kw)
+    assert not off["matters"] and off["dS"] < 1e-3, off
