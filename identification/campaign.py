@@ -68,9 +68,9 @@ def run_task(task: Task) -> dict:
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
     c0 = time.process_time()
     try:
-        res = run(problem, task.staged, task.shrink, max_evals=task.max_evals, seed=task.seed, journal=task.journal_path,
-                  progress=False, restarts=task.restarts, presolve=task.presolve, refine_evals=task.refine_evals,
-                  uncertainty=task.uncertainty)
+        res = run(problem, task.staged, task.shrink, max_evals=task.max_evals, seed=task.seed,
+                  journal=task.journal_path, progress=False, restarts=task.restarts, presolve=task.presolve,
+                  refine_evals=task.refine_evals, uncertainty=task.uncertainty)
     finally:
         problem.sim.close()
     out = res.to_dict()
@@ -101,7 +101,8 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
     if not folders:
         raise FileNotFoundError(f"{data_dir} holds no measurement (no meta.json in it or below)")
     tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts), int(presolve),
-                  int(refine_evals), bool(uncertainty), objective, bool(staged), bool(shrink)) for p in folders for m in models]
+                  int(refine_evals), bool(uncertainty), objective, bool(staged), bool(shrink))
+             for p in folders for m in models]
     twice = sorted({t.key for t in tasks if sum(u.key == t.key for u in tasks) > 1})
     if twice:  # results are filed by folder name
         raise ValueError(f"{data_dir}: measurement folders share a name ({', '.join(twice[:5])}); a campaign "
@@ -111,7 +112,8 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
                                               "settle": settle, "free": list(free) if free else None,
                                               "tare": tare, "restarts": int(restarts), "presolve": int(presolve),
                                               "refine_evals": int(refine_evals), "uncertainty": bool(uncertainty),
-                                              "objective": objective, "staged": bool(staged), "shrink": bool(shrink),
+                                              "objective": objective, "staged": bool(staged),
+                                              "shrink": bool(shrink),
                                               "tasks": [t.key for t in tasks]})
     todo = [t for t in tasks if not t.result_path.exists()]
     bar = None

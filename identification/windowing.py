@@ -8,7 +8,8 @@ chaotically, the objective is rough, the complex stops in a wrong basin and
 the roughness check (uncertainty.intervals: forward and backward differences
 disagree) calls the CoRs not identifiable. The first second of the same
 record is still smooth (the Cramer-Rao computation of
-benchmarks/bench_information.py: layout 5's m13 and m16 at 1.0 s).
+benchmarks/bench_information.py: all six of layout 5's start-stops at 1.0 s,
+benchmarks/results/information_window1.0.json).
 
 `identify_windowed` identifies at the record's window first; when a CoR is
 rough at the optimum, or a likelihood fit stays above the declared noise, it
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Callable, Optional, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -73,7 +74,7 @@ def identify_windowed(problem, run: Callable, ladder: Sequence[float] = LADDER, 
     steps = [w for w in sorted(set(float(w) for w in ladder), reverse=True) if w < full - 1e-9]
     journal = kw.pop("journal", None)
     tried, current, res = [], problem, None
-    for k, w in enumerate([None] + steps):
+    for w in [None] + steps:
         if w is not None:
             current = _starting(truncated(problem, w), res.problem.values(res.x))
         jr = None if journal is None else (journal if w is None else _suffix(journal, f".w{w:g}"))
