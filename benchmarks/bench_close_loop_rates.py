@@ -48,7 +48,8 @@ WORK = ROOT / "build" / "bench_close_loop_rates"
 SUMMARY = ROOT / "benchmarks" / "results" / "close_loop_rates.json"
 
 # the loop's budgets for the benchmark (small: records of 1 s)
-BUDGET = dict(base_evals=80, max_evals=100, fit_evals=20, refine_evals=40, base_refine_evals=60, test_max=2, rounds=1)
+BUDGET = dict(base_evals=80, max_evals=100, fit_evals=20, refine_evals=40, base_refine_evals=60, test_max=2, rounds=1,
+              first_window=0.3)   # s, the base's first window (identification.growing); 0: the whole record
 CARTS = (0, 7, 13, 20, 26, 33, 39, 46)   # transducer carts of the release transient: in curves and on straights
 
 # family -> (unit, amplitudes, what the amplitude is)
@@ -213,13 +214,15 @@ def run_case(case: dict, budget: dict = BUDGET) -> dict:
                            "effect": ev.effect, "T": ev.lr.T, "dof": ev.lr.dof, "p": ev.lr.p, "p_adj": ev.lr.p_adj,
                            "dbic": ev.lr.dbic, "method": ev.lr.method, "holdout_gain": ev.holdout.gain,
                            "amplitude": ev.amplitude, "why_not": ev.why_not},
-                       "tests": [(t.effect, t.lr.p_adj, t.lr.dbic, t.holdout.gain, t.supported) for t in r.tests],
+                       "tests": [(t.effect, t.lr.p_adj, t.lr.dbic, t.holdout.gain if t.holdout else None, t.supported,
+                                  t.S / problem.samples.size, t.why_not) for t in r.tests],
+                       "S_base_per_sample": r.S_base / problem.samples.size,
                        "departures": [(d.family, d.label, d.test.p_adj, d.test.dbic) for d in r.departures],
                        "ranking": [(h.effect, h.share) for h in r.attribution.ranking[:4]],
                        "dropped": r.dropped})
     return {**case, "truth": truth, "found": res.found, "outcome": res.outcome, "verdict": res.verdict,
             "rounds": rounds, "layout": problem.layout, "protocol": problem.protocol.name,
-            "samples": len(problem.times), "free": list(problem.free),
+            "samples": len(problem.times), "free": list(problem.free), "base_grown": res.grown,
             "wall_s": time.time() - t0, "cpu_s": time.process_time() - c0, "budget": budget}
 
 
@@ -228,9 +231,12 @@ def parse_budget(text: str) -> dict:
     out = dict(BUDGET)
     for item in filter(None, (text or "").split(",")):
         key, _, val = item.partition("=")
-        if key not in BUDGET or not val.strip().isdigit():
-            raise SystemExit(f"--budget: {item!r} is not KEY=INTEGER with KEY one of {', '.join(BUDGET)}")
-        out[key] = int(val)
+        try:
+            out[key] = float(val) if key == "first_window" else int(val)
+        except ValueError:
+            out[key] = None
+        if key not in BUDGET or out[key] is None or out[key] < 0:
+            raise SystemExit(f"--budget: {item!r} is not KEY=NUMBER >= 0 with KEY one of {', '.join(BUDGET)}")
     return out
 
 

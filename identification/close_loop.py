@@ -48,6 +48,7 @@ from .base_polish import BASE_REFINE_EVALS, PROFILE_POINTS, polish_base
 from .candidates import REFINE_EVALS, RESCORE, RESCORE_EVALS, examine_candidate, rescore
 from .catalogue import CATALOGUE
 from .departures import departures
+from .growing import FIRST, grow
 from .identify import identify
 from .locate import analyse, catalogue_bands, context, localise, signals_at
 from .loop_result import CloseLoopResult, Round
@@ -70,7 +71,7 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
                fit_evals: int = RESCORE_EVALS, refine_evals: int = REFINE_EVALS,
                base_refine_evals: int = BASE_REFINE_EVALS, noise_std: Optional[Mapping[str, float]] = None,
                test_max: int = TEST_MAX, polish_evals: Optional[int] = None,
-               profile_points: int = PROFILE_POINTS) -> CloseLoopResult:
+               profile_points: int = PROFILE_POINTS, first_window: Optional[float] = FIRST) -> CloseLoopResult:
     """The loop on one problem: base identification (unless x_base is given),
     then up to `rounds` rounds of analysis, attribution, extension and tests.
     `sensor_offset_std`: the transducer's declared zero tolerance per force
@@ -80,12 +81,23 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
     `polish_evals`: the complex run again from the base point at the start of
     each round (default `max_evals`, what an extension gets; 0: none);
     `profile_points`: the profile of the base's least-determined variable
-    (profile_polish; 0: none)."""
+    (profile_polish; 0: none). `first_window`: the base identification
+    starts on the record's first seconds and grows its window to the whole
+    record (identification.growing; the complex's `base_evals` counted in
+    simulations of the whole record); None or 0: the complex on the whole
+    record."""
     t0 = time.time()
     out = Path(out) if out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
-    if x_base is None:
+    grown = None
+    if x_base is None and first_window:
+        duration = float(problem.times[-1] - problem.times[0])
+        evals = int(round(base_evals * max(1.0, duration / float(first_window))))
+        x_base, grown = grow(problem, evals=evals, noise_std=noise_std, first=float(first_window),
+                             profile_points=profile_points, seed=seed,
+                             journal=out / f"base_first{float(first_window):g}s_journal.jsonl" if out else None)
+    elif x_base is None:
         res = identify(problem, max_evals=base_evals, seed=seed, progress=progress, workers=workers,
                        journal=out / "base_journal.jsonl" if out else None)
         x_base = res.x
@@ -108,7 +120,7 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
         # the next extension then identifies both together
         base = dataclasses.replace(rnd.problem_extended, x0=rnd.problem_extended.values(rnd.x_extended))
         x = np.asarray(rnd.x_extended, float)
-    return CloseLoopResult(problem, np.asarray(x_base, float), result_rounds, time.time() - t0)
+    return CloseLoopResult(problem, np.asarray(x_base, float), result_rounds, time.time() - t0, grown)
 
 
 def hypothesis_counts(att: Attribution) -> dict:

@@ -115,6 +115,7 @@ class CloseLoopResult:
     x_base: np.ndarray
     rounds: list
     seconds: float
+    grown: Optional[dict] = None   # the base's growing windows (identification.growing), if it grew
 
     @property
     def found(self) -> list:
@@ -131,4 +132,5 @@ class CloseLoopResult:
     def to_dict(self) -> dict:
         return {"measurement": self.problem.name, "model": self.problem.model, "layout": self.problem.layout,
                 "protocol": self.problem.protocol.name, "found": self.found, "verdict": self.verdict,
-                "outcome": self.outcome, "seconds": self.seconds, "rounds": [r.to_dict() for r in self.rounds]}
+                "outcome": self.outcome, "seconds": self.seconds, "base_grown": self.grown,
+                "rounds": [r.to_dict() for r in self.rounds]}

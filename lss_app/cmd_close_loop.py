@@ -1,7 +1,7 @@
 """`lss close-loop`: residual -> missing effect -> extended model, with the
 report (identification.close_loop; docs/close_loop.md).
 
-    lss close-loop MEAS_DIR --model HW --out DIR [--base-evals N] [--max-evals N]
+    lss close-loop MEAS_DIR --model HW --out DIR [--base-evals N] [--first-window S] [--max-evals N]
                    [--window S] [--rounds 2] [--effects a,b] [--seed S] [--noise declared|estimate]
 
 The record's metadata says what to simulate: its protocol (steady, start-up,
@@ -19,6 +19,7 @@ def register(sub, common) -> None:
     from identification.catalogue import CATALOGUE
     from identification.close_loop import (BASE_REFINE_EVALS, PROFILE_POINTS, REFINE_EVALS, RESCORE_EVALS,
                                            TEST_MAX)
+    from identification.growing import FIRST
     ap = sub.add_parser("close-loop", parents=[common], help="residual -> missing effect -> extended model",
                         description="Close the loop: residual -> missing effect -> extended model.")
     ap.add_argument("measurement", help="measurement folder (samples.csv + meta.json)")
@@ -27,7 +28,11 @@ def register(sub, common) -> None:
     ap.add_argument("--base-result", default=None,
                     help="result.json of an earlier `lss identify` of this measurement and model (skips the "
                          "base identification)")
-    ap.add_argument("--base-evals", type=int, default=300, help="evaluations of the base identification")
+    ap.add_argument("--base-evals", type=int, default=300,
+                    help="evaluations of the base identification, counted in simulations of the whole record")
+    ap.add_argument("--first-window", type=float, default=FIRST,
+                    help="the base identification starts on the record's first S seconds and grows its window "
+                         f"to the whole record (default {FIRST:g}; 0: the complex on the whole record)")
     ap.add_argument("--max-evals", type=int, default=200, help="evaluations of each extended identification")
     ap.add_argument("--free", default=None, help="base design variables, e.g. e_JA,e_JR,e_SW,e_RW (default all)")
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
@@ -73,8 +78,8 @@ def run(args) -> int:
         if v < 1:
             raise ValueError(f"{name} {v}: must be at least 1")
     for name, v in (("--refine-evals", args.refine_evals), ("--base-refine-evals", args.base_refine_evals),
-                    ("--profile-points", args.profile_points)):
-        if v < 0:
+                    ("--profile-points", args.profile_points), ("--first-window", args.first_window)):
+        if not v >= 0:
             raise ValueError(f"{name} {v}: must be at least 0")
     effects = None
     if args.effects:
@@ -99,6 +104,7 @@ def run(args) -> int:
                      fit_evals=args.fit_evals, refine_evals=args.refine_evals,
                      base_refine_evals=args.base_refine_evals, test_max=args.candidates,
                      profile_points=args.profile_points, polish_evals=args.max_evals,
+                     first_window=args.first_window or None,
                      noise_std=sensor.get("force_noise_std_N") if args.noise == "declared" else None)
     write_json_atomic(out / "result.json", res.to_dict())
     report = write_report(res, out)
