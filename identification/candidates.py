@@ -21,8 +21,8 @@ from .extension import extended_problem, extension_of
 from .holdout import holdout
 from .identify import identify
 from .loop_result import CandidateTest
-from .noise import ALPHA
-from .problem import IdentificationProblem, nrmsd, weighted_residual
+from .noise import ALPHA, excess
+from .problem import IdentificationProblem, nrmsd, tared, weighted_residual
 from .refine import refine
 
 log = logging.getLogger(__name__)
@@ -199,8 +199,13 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     amp = CATALOGUE[sc.effect].amplitude(vals, base.samples.mean(axis=0))
     every = signature_columns(base, x_b, sc, ext, sim_b, every=True) \
         if isinstance(CATALOGUE[sc.effect], SensorError) else G_raw
+    # does the model with it reach the noise? (a wrong effect takes a share of a missing one's misfit
+    # past every test above, but leaves the rest: close_loop holds such a candidate provisional)
+    exc_e = excess(tared(stage2.samples - sim_e, stage2.tare), 1.0 / np.sqrt(w), len(stage2.free)) if not why else None
+    share = None if exc_e is None else float((S_b - S_e) / max(S_b - exc_e.dof, 1e-12 * S_b))
     return CandidateTest(sc.effect, sc.label, stage2, x_e, float(np.sum(H_e ** 2)), H_e, S_e, lr, ho, identified,
-                         amp, refined, supported=not why, why_not=why, base_alt=base_alt, signature=every)
+                         amp, refined, supported=not why, why_not=why, base_alt=base_alt, signature=every,
+                         excess=exc_e, misfit_share=share)
 
 
 def switched_off(base, xb, ext_problem, sim_e, S_e, G, w, kw) -> Optional[dict]:

@@ -111,7 +111,7 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
                         test_max=test_max, polish_evals=max_evals if polish_evals is None else polish_evals,
                         profile_points=profile_points)
         result_rounds.append(rnd)
-        if not rnd.confirmed or not [e for e in remaining if e != rnd.effect]:
+        if not (rnd.confirmed or rnd.provisional) or not [e for e in remaining if e != rnd.effect]:
             break
         remaining.remove(rnd.effect)
         # the next round's base is the extended model, the found effect still free: a second
@@ -120,7 +120,30 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
         # the next extension then identifies both together
         base = dataclasses.replace(rnd.problem_extended, x0=rnd.problem_extended.values(rnd.x_extended))
         x = np.asarray(rnd.x_extended, float)
+    settle_provisional(result_rounds)
     return CloseLoopResult(problem, np.asarray(x_base, float), result_rounds, time.time() - t0, grown)
+
+
+def settle_provisional(rounds: Sequence[Round]) -> None:
+    """A provisional effect (it passed every test, but the model with it stayed
+    above the noise) is confirmed when the last round's model, which carries
+    it, reaches the noise (that round confirmed an effect at the noise, or
+    found nothing significant above it); otherwise it stays unconfirmed."""
+    if not rounds:
+        return
+    last = rounds[-1]
+    at_noise = (last.confirmed and not last.provisional) or last.outcome == "nothing significant"
+    for r in rounds:
+        if not r.provisional:
+            continue
+        if at_noise and r is not last:
+            r.confirmed, r.outcome = True, "confirmed"
+            r.verdict = (f"{r.verdict_if_confirmed}; with the effect of round {last.number} the model reaches "
+                         f"the noise" if last.confirmed else
+                         f"{r.verdict_if_confirmed}; at the next round's refitted base the residual is at the noise")
+        else:
+            r.verdict += "; no later round brought the model to the noise"
+
 
 
 def hypothesis_counts(att: Attribution) -> dict:
@@ -228,8 +251,8 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
             if better is None or t.base_alt[1] < better[1]:
                 better = (t.base_alt[0], t.base_alt[1], t.effect)
             break
-        if t.supported:
-            break
+        if t.supported and t.adequate:
+            break   # a supported candidate above the noise: the next one may reach it (verdict.decide)
     if better is not None:
         return rnd, better
     decide(rnd, base, r_b, s, w)

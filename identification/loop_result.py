@@ -16,6 +16,9 @@ from .noise import ALPHA, Noise
 from .problem import IdentificationProblem
 
 
+MISFIT_SHARE = 0.8   # a candidate above the noise must remove this share of the base's misfit above it
+
+
 @dataclass
 class CandidateTest:
     """One candidate effect through the extended identification and the tests."""
@@ -35,13 +38,41 @@ class CandidateTest:
     why_not: list = field(default_factory=list)
     base_alt: Optional[tuple] = field(default=None, repr=False)   # (x, S) of the base refitted from here
     signature: list = field(default=None, repr=False)   # the hypothesis' columns at the base, every probe
+    excess: object = None        # noise.Excess of the extension's residual (computed once the tests pass)
+    misfit_share: Optional[float] = None   # the share of the base's S above the noise (S - dof) it removes
+
+    @property
+    def adequate(self) -> bool:
+        """The extended model leaves noise (no channel's residual above it), or
+        it removes at least MISFIT_SHARE of the base's misfit above the noise
+        (a second effect, or the base's last digits, may hold the rest)."""
+        if self.excess is None:
+            return False
+        return not self.excess.any or (self.misfit_share is not None and self.misfit_share >= MISFIT_SHARE)
+
+    @property
+    def status(self) -> str:
+        """The candidate's own verdict, for the reports."""
+        if not self.supported:
+            return "; ".join(self.why_not)
+        if self.excess is None:
+            return "passes every test"
+        if not self.excess.any:
+            return "passes every test; the model with it reaches the noise"
+        share = "" if self.misfit_share is None else f"{100 * self.misfit_share:.0f}% of the base's misfit above it"
+        if self.adequate:
+            return f"passes every test; removes {share}"
+        return (f"passes every test; the model with it stays above the noise (mean square / noise up to "
+                f"{float(np.max(self.excess.ratio)):.2f}; {share or 'its share unknown'} removed)")
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "hypothesis": self.label, "f": self.f, "S": self.S,
                 "parameters": list(self.identified), "lr": self.lr.to_dict(),
                 "holdout": None if self.holdout is None else self.holdout.to_dict(),
                 "identified": self.identified, "amplitude": self.amplitude, "supported": self.supported,
-                "why_not": self.why_not, "refined": self.refined}
+                "why_not": self.why_not, "refined": self.refined, "adequate": self.adequate,
+                "misfit_share": self.misfit_share,
+                "excess": None if self.excess is None else self.excess.to_dict()}
 
 
 @dataclass
@@ -75,10 +106,17 @@ class Round:
     dropped: list = field(default_factory=list)    # {"effect", "stage", "reason"}
     hypotheses: int = 0                            # m of the Bonferroni correction
     base_restarts: list = field(default_factory=list)  # better bases found through an extension
+    provisional: bool = False    # a candidate passed the tests but its extension stays above the noise: confirmed
+                                 # only if a later round's model (with it) reaches the noise
+    verdict_if_confirmed: str = field(default="", repr=False)
 
     @property
     def evidence(self) -> Optional[CandidateTest]:
-        """The test behind the verdict: the confirmed candidate, else the first tested."""
+        """The test behind the verdict: the supported candidate that reaches the
+        noise, else the first supported one (provisional), else the first tested."""
+        for t in self.tests:
+            if t.supported and t.adequate:
+                return t
         for t in self.tests:
             if t.supported:
                 return t
@@ -89,7 +127,7 @@ class Round:
         ev = self.evidence
         return {
             "round": self.number, "verdict": self.verdict, "outcome": self.outcome, "effect": self.effect,
-            "confirmed": self.confirmed,
+            "confirmed": self.confirmed, "provisional": self.provisional,
             "f_base": self.f_base, "nrmsd_base": dict(zip(chans, map(float, self.H_base))),
             "f_extended": self.f_extended,
             "nrmsd_extended": None if self.H_extended is None else dict(zip(chans, map(float, self.H_extended))),

@@ -111,7 +111,7 @@ def _evidence(rnd) -> list:
         ho = "-" if t.holdout is None else f"{100 * t.holdout.gain:+.1f}%"
         rows.append(f"| {t.effect} ({t.label}) | {t.lr.T:.4g} ({t.lr.dof:.2g}) | {t.lr.p:.2g} | "
                     f"{t.lr.p_adj:.2g} ({t.lr.m}) | {t.lr.dbic:+.1f} | {ho} | "
-                    f"{'confirmed' if t.supported else '; '.join(t.why_not)} |")
+                    f"{t.status} |")
     for d in rnd.departures:
         rows.append(f"| outside: {d.family}, {d.label} | {d.test.T:.4g} ({d.test.dof:.2g}) | {d.test.p:.2g} | "
                     f"{d.test.p_adj:.2g} ({d.test.m}) | {d.test.dbic:+.1f} | - | - |")

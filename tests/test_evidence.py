@@ -196,3 +196,39 @@ def test_an_effect_must_matter_at_its_estimate():
     S_e = float(np.sum((samples - ext_run) ** 2 * W))
     off = switched_off(_Model(samples, base_run), None, _Model(samples, ext_run), ext_run, S_e, [g], W, kw)
     assert not off["matters"] and off["dS"] < 1e-3, off
+
+
+def _round(number, outcome, *, confirmed=False, provisional=False):
+    from identification.attribution import Attribution
+    from identification.loop_result import Round
+    r = Round(number, 1.0, np.ones(7), Attribution(1.0, 1.0, [], []), f"round {number}: {outcome}",
+              effect=f"effect{number}", confirmed=confirmed, provisional=provisional, outcome=outcome)
+    r.verdict_if_confirmed = f"effect{number} confirmed"
+    return r
+
+
+def test_a_provisional_effect_needs_a_later_model_at_the_noise():
+    """An effect that passes the tests while the model with it stays above the
+    noise is confirmed only when a later round's model, carrying it, reaches
+    the noise (close_loop.settle_provisional)."""
+    from identification.close_loop import settle_provisional
+    # alone (one round, or nothing found after it): not confirmed
+    one = [_round(1, "not in the catalogue", provisional=True)]
+    settle_provisional(one)
+    assert not one[0].confirmed and "no later round brought the model to the noise" in one[0].verdict
+    rounds = [_round(1, "not in the catalogue", provisional=True), _round(2, "not in the catalogue")]
+    settle_provisional(rounds)
+    assert not rounds[0].confirmed and rounds[0].outcome == "not in the catalogue"
+    # a second effect brings the model to the noise: both confirmed
+    rounds = [_round(1, "not in the catalogue", provisional=True), _round(2, "confirmed", confirmed=True)]
+    settle_provisional(rounds)
+    assert rounds[0].confirmed and rounds[0].outcome == "confirmed" and rounds[1].confirmed
+    assert rounds[0].verdict.startswith("effect1 confirmed") and "round 2" in rounds[0].verdict
+    # at the next round's refitted base the residual is noise: confirmed
+    rounds = [_round(1, "not in the catalogue", provisional=True), _round(2, "nothing significant")]
+    settle_provisional(rounds)
+    assert rounds[0].confirmed
+    # two provisional rounds, none at the noise: neither
+    rounds = [_round(1, "x", provisional=True), _round(2, "not in the catalogue", provisional=True)]
+    settle_provisional(rounds)
+    assert not any(r.confirmed for r in rounds)
