@@ -145,7 +145,6 @@ def settle_provisional(rounds: Sequence[Round]) -> None:
             r.verdict += "; no later round brought the model to the noise"
 
 
-
 def hypothesis_counts(att: Attribution) -> dict:
     """Per effect, the hypotheses the round scanned (failed ones included): the
     Bonferroni correction's m. The sensor effect counts its channels (the
@@ -252,7 +251,7 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
                 better = (t.base_alt[0], t.base_alt[1], t.effect)
             break
         if t.supported and t.adequate:
-            break   # a supported candidate above the noise: the next one may reach it (verdict.decide)
+            break   # (one that passes but leaves the model above the noise: the next may do better)
     if better is not None:
         return rnd, better
     decide(rnd, base, r_b, s, w)

@@ -20,7 +20,6 @@ Nothing of the truth is used.
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -29,10 +28,10 @@ from typing import Mapping, Optional
 
 import numpy as np
 
-from .base_polish import STEP, profile_polish
-from .identify import identify
 from lss_fmu.variables import FORCE_CHANNELS
 
+from .base_polish import STEP, profile_polish
+from .identify import identify
 from .noise import noise_levels
 from .problem import IdentificationProblem, tared, weighted_residual
 from .refine import refine

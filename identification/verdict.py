@@ -6,13 +6,13 @@ import logging
 
 import numpy as np
 
+from lss_fmu.variables import FORCE_CHANNELS
+
 from .candidates import sensor_columns
 from .catalogue import CATALOGUE
 from .departures import beyond
 from .locate import localise, where_text
 from .loop_result import CandidateTest, Round
-from lss_fmu.variables import FORCE_CHANNELS
-
 from .problem import IdentificationProblem, weighted_residual
 
 log = logging.getLogger(__name__)
