@@ -109,18 +109,19 @@ def test_gain_only_sensor_error_is_a_sensor_fault(fmu_file):
     assert abs(rnd.identified["effects.sensor.gain.steering.F_right"] - 0.05) <= 0.25 * 0.05, rnd.identified
 
 
-@pytest.mark.parametrize("seed, transducer", [(4, 26)])
+@pytest.mark.parametrize("seed, transducer", [(1458325094, 26)])   # the benchmark's mass_a3_r04
 def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
     """The transducer cart 1 % heavier: a motor ripple fitted in its place
     took a share of the misfit past every test (the benchmark's record
-    mass_a3_r04), but the model with it stayed ten times above the noise.
-    Only an effect whose model reaches the noise is confirmed: the mass, or
-    nothing."""
+    mass_a3_r04: S per sample from 12.1 to 10.5), but the model with it
+    stayed ten times above the noise. Only an effect whose model reaches the
+    noise, or removes most of the misfit above it, is confirmed: the mass,
+    or nothing."""
     params = {"effects.mass.transducer_factor": 1.01}
     problem, _ = effect_case([], seed, params=params, transducer=transducer)
     res = _loop(problem, **QUICK)
     rnd = res.rounds[0]
-    _record(f"mass_share_{seed}", res, truth=params)
+    _record("mass_share_a3_r04", res, truth=params)
     assert res.found in ([], ["mass"]), rnd.verdict
     for t in rnd.tests:
         assert not t.supported or t.effect == "mass" or not t.adequate, (t.effect, t.status)
