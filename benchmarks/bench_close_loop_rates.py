@@ -73,7 +73,7 @@ OOC = ("interference", "clock_drift", "crosstalk", "channel_bump")
 RIG_CLEAN = [("start-up", 1, 1.0), ("start-up", 5, 1.0), ("start-up", 12, 1.0), ("start-up", 13, 1.0),
              ("start-up", 19, 1.0), ("start-up", 20, 1.0), ("speed-step", 20, 1.5), ("speed-step", 21, 1.5),
              ("stop", 20, 1.5), ("stop", 22, 1.5), ("steady", 20, 1.0), ("steady", 21, 1.0)]
-SYN_CLEAN = 10
+SYN_CLEAN = 16
 
 
 def _rng(*key) -> np.random.Generator:
@@ -344,13 +344,14 @@ def figure(summary: dict, path: Path) -> None:
 
 
 def table(summary: dict) -> str:
-    lines = ["| effect | amplitude | " + " | ".join(f"a{i}" for i in range(4)) + " | smallest found in >= 90 % |",
-             "|---|---|---|---|---|---|---|"]
+    n = max(len(d["rows"]) for d in summary["detection"].values())
+    lines = ["| effect | unit | " + " | ".join(f"a{i}" for i in range(n)) + " | smallest found in >= 90 % |",
+             "|---|---|" + "---|" * (n + 1)]
     for fam, d in summary["detection"].items():
         cells = [f"{row['amplitude']:g}: {row['found']}/{row['records']}"
                  + (f" ({row['wrong_effect']} wrong)" if row["wrong_effect"] else "") if row["records"]
                  else f"{row['amplitude']:g}: -" for row in d["rows"]]
-        best = "-" if d["smallest_90"] is None else f"{d['smallest_90']:g} {d['unit']}"
+        best = "-" if d["smallest_90"] is None else f"{d['smallest_90']:g}" + ("" if d["unit"] == "1" else f" {d['unit']}")
         lines.append(f"| {fam} | {d['unit']} | " + " | ".join(cells) + f" | {best} |")
     return "\n".join(lines)
 
