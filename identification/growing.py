@@ -33,7 +33,7 @@ from lss_fmu.variables import FORCE_CHANNELS
 from .base_polish import STEP, profile_polish
 from .identify import identify
 from .noise import noise_levels
-from .problem import IdentificationProblem, tared, weighted_residual
+from .problem import IdentificationProblem, tared
 from .refine import refine
 from .windowing import truncated
 
@@ -81,14 +81,14 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     res = identify(q, max_evals=max(int(evals), len(problem.free) + 3), seed=seed, progress=False, journal=journal)
     x = np.asarray(res.x, float)
     nfev = int(getattr(res, "nfev", evals))
-    w = _weights(q, x, noise_std)
+    w, S = _weights(q, x, noise_std)
     if profile_points > 1:
         try:
-            xp, _, pinfo = profile_polish(q, x, w, points=profile_points)
+            xp, S, pinfo = profile_polish(q, x, w, points=profile_points)
             x, nfev = np.asarray(xp, float), nfev + int(pinfo.get("nfev", 0))
         except Exception as exc:   # the complex's point stands
             log.warning("grow: profile on the first window failed: %s", exc)
-    trail = [{"window_s": steps[0], "S_per_sample": _s_per_sample(q, x, w)}]
+    trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
     per_window = STEP_ITERATIONS * (2 * len(x) + 2) + 1
     for t in steps[1:]:
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
@@ -96,32 +96,25 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         nfev += r.nfev
         if np.isfinite(r.f):
             x = np.asarray(r.x, float)
-        trail.append({"window_s": t, "S_per_sample": _s_per_sample(q, x, w)})
+        # refine's f is S in the same metric at its point: no simulation more
+        trail.append({"window_s": t, "S_per_sample": float(r.f) / q.samples.size})
     return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0}
 
 
-def _weights(q, x, noise_std) -> np.ndarray:
-    """1 / sigma^2 per column, the noise declared or the residual's white part
-    at x (a joint problem: its records' columns side by side, 7 each); all
-    ones if x does not simulate."""
+def _weights(q, x, noise_std) -> tuple:
+    """(1 / sigma^2 per column, S at x): the noise declared or the residual's
+    white part at x (a joint problem: its records' columns side by side, 7
+    each); all ones and S infinite if x does not simulate."""
     try:
         r = tared(q.samples - q.simulate(x), q.tare)
     except Exception as exc:
         log.warning("grow: the first window's point does not simulate (%s): unweighted", exc)
-        return np.ones(np.shape(q.samples)[1])
+        return np.ones(np.shape(q.samples)[1]), float("inf")
     sig = []
     for k in range(0, r.shape[1], len(FORCE_CHANNELS)):
         sig.append(noise_levels(r[:, k:k + len(FORCE_CHANNELS)], noise_std).sigma)
-    return 1.0 / np.concatenate(sig) ** 2
-
-
-def _s_per_sample(q: IdentificationProblem, x, w) -> float:
-    """S / (samples x channels) at x: about 1 at the noise."""
-    try:
-        r, S = weighted_residual(q, q.simulate(x), w)
-        return float(S) / max(1, np.size(r))
-    except Exception:
-        return float("inf")
+    w = 1.0 / np.concatenate(sig) ** 2
+    return w, float(np.sum(r ** 2 * w))
 
 
 __all__ = ["grow", "windows", "FIRST", "GROWTH"]
