@@ -18,16 +18,17 @@ from .base_polish import BASE_REFINE_EVALS, STEP
 from .catalogue import CATALOGUE, SensorError
 from .evidence import fit_gain, lr_test, project_out
 from .extension import extended_problem, extension_of
+from .growing import FIRST, grow
 from .holdout import holdout
 from .identify import identify
-from .loop_result import CandidateTest
+from .loop_result import MISFIT_SHARE, CandidateTest
 from .noise import ALPHA, excess
 from .problem import IdentificationProblem, nrmsd, tared, weighted_residual
 from .refine import refine
 
 log = logging.getLogger(__name__)
 
-RESCORE = 3          # effects fitted through the FMU after the linear ranking ...
+RESCORE = 4          # effects fitted through the FMU after the linear ranking (at least close_loop's test_max) ...
 RESCORE_EVALS = 20   # ... with this many evaluations each
 REFINE_EVALS = 80    # simulations of the local refinement (identification.refine) ending each extension
 
@@ -109,19 +110,25 @@ def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0:
 
 
 def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, seed, out, number, progress,
-                      workers, refine_evals, base_refine_evals=BASE_REFINE_EVALS) -> CandidateTest:
+                      workers, refine_evals, base_refine_evals=BASE_REFINE_EVALS,
+                      regrow_evals: int = 0) -> CandidateTest:
     """The candidate through the tests. What the effect explains is measured
     where the base cannot move into another valley (the CoR landscape is rough
     and many-valleyed: a wider search with more parameters finds a lower valley
     of the *base* and credits the effect with it): the larger of (a) the linear
     fit of its signature to the refitted base's residual beyond the base
     columns and (b) the fit of its parameters through the FMU with the base held
-    at its optimum (Levenberg-Marquardt from the rescore's complex), each tested
+    at its optimum (Levenberg-Marquardt from the rescore's complex; if only (a)
+    passes, the base identified with it from there: `regrow`), each tested
     against the noise (evidence.lr_test; the Bonferroni m doubled for taking the
     larger). Held-out: the base and (b), each refitted on the other blocks.
     Only a candidate that passes is identified globally (the complex over all
     parameters, then refine) for its estimates, and the base refitted from that
-    point's base parameters (a better base restarts the round, one_round)."""
+    point's base parameters (a better base restarts the round, one_round).
+    If that leaves the extended model short of the noise (`adequacy`), it is
+    identified once more as the base was, over growing windows (`regrow`,
+    `regrow_evals` complex evaluations counted in whole-record simulations;
+    0: not)."""
     sc, ext, prob_ext = fit.score, fit.ext, fit.problem
     x0 = {**prob_ext.x0, **fit.stage1.problem.values(fit.stage1.x)}
     stage2 = dataclasses.replace(prob_ext, x0=x0)
@@ -143,6 +150,28 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     kw = dict(q=len(ext.free), m=2 * m, m_effect=m_effect, J=att.base_columns)
     lr_lin = lr_test(S_b, S_b - (S0 - S1), G, r_b - fit_lin, w, **kw)
     lr_held = lr_test(S_b, S_h, G, r_h, w, **kw)
+    if not (lr_held.significant and lr_held.dbic > 0) and lr_lin.significant and lr_lin.dbic > 0 and refine_evals > 0:
+        # the signature is in the residual, but at the base parameters that compensated for the
+        # effect the FMU cannot show it (a quarter heavier cart: at the base's CoRs its fitted mass
+        # raised S threefold, and Levenberg-Marquardt on both from there stopped above the base):
+        # the extended model identified as the base was (`regrow`; else refined locally)
+        try:
+            if regrow_evals > 0:
+                xj, S_j, sim_j, info = regrow(stage2, x_held_full, base.free, w, evals=regrow_evals, seed=seed + 3,
+                                              journal=out / f"round{number}_joint_{sc.effect}.jsonl" if out else None)
+                refined["joint"] = {"S_start": S_h, "S": S_j, "nfev": info["nfev"], "windows": info["windows"]}
+            else:
+                rj = refine(stage2, x_held_full, max_evals=refine_evals, central=True, channel_weights=w,
+                            rel_step=STEP)
+                xj, S_j, sim_j = np.asarray(rj.x, float), float(rj.f), rj.sim
+                refined["joint"] = {"S_start": rj.f_start, "S": rj.f, "nfev": rj.nfev, "iterations": rj.iterations}
+            if np.isfinite(S_j) and S_j < S_h:
+                x_held_full = xj
+                sim_h = sim_j if sim_j is not None else stage2.simulate(x_held_full)
+                r_h, S_h = weighted_residual(stage2, sim_h, w)
+                lr_held = lr_test(S_b, S_h, G, r_h, w, **kw)
+        except Exception as exc:
+            log.warning("%s: the joint fit failed: %s", sc.effect, exc)
     lr = lr_held if lr_held.T >= lr_lin.T else lr_lin
     lr.method = ("held" if lr is lr_held else "linear") + "/" + lr.method
     ho = holdout(base, x_b, stage2, x_held_full, w)
@@ -175,6 +204,18 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
                 x_e, S_e, sim_e = xg, S_g, sim_g
         except Exception as exc:
             log.warning("%s: the global extension's point cannot be simulated: %s", sc.effect, exc)
+        if regrow_evals > 0 and not adequacy(stage2, sim_e, S_b, S_e, w)[2]:
+            # the extended model above the noise: its CoRs may sit in another valley of the whole
+            # record, as the base's did before it was grown (identification.growing). It gets the
+            # base's treatment, the effect held at its estimate on the first window
+            try:
+                xr, S_r, sim_r, info = regrow(stage2, x_e, base.free, w, evals=regrow_evals, seed=seed + 2,
+                                              journal=out / f"round{number}_regrow_{sc.effect}.jsonl" if out else None)
+                refined["regrown"] = {"S_start": S_e, "S": S_r, "nfev": info["nfev"], "windows": info["windows"]}
+                if S_r < S_e:
+                    x_e, S_e, sim_e = xr, S_r, sim_r
+            except Exception as exc:
+                log.warning("%s: the regrown extension failed: %s", sc.effect, exc)
         # the base from the extension's base parameters: if it gets lower there, the base had
         # stopped in another valley (the round starts again from that base, one_round)
         vals_e = stage2.values(x_e)
@@ -201,11 +242,33 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
         if isinstance(CATALOGUE[sc.effect], SensorError) else G_raw
     # does the model with it reach the noise? (a wrong effect takes a share of a missing one's misfit
     # past every test above, but leaves the rest: close_loop holds such a candidate provisional)
-    exc_e = excess(tared(stage2.samples - sim_e, stage2.tare), 1.0 / np.sqrt(w), len(stage2.free)) if not why else None
-    share = None if exc_e is None else float((S_b - S_e) / max(S_b - exc_e.dof, 1e-12 * S_b))
+    exc_e, share, _ = adequacy(stage2, sim_e, S_b, S_e, w) if not why else (None, None, False)
     return CandidateTest(sc.effect, sc.label, stage2, x_e, float(np.sum(H_e ** 2)), H_e, S_e, lr, ho, identified,
                          amp, refined, supported=not why, why_not=why, base_alt=base_alt, signature=every,
                          excess=exc_e, misfit_share=share)
+
+
+def adequacy(problem, sim, S_b, S, w) -> tuple:
+    """(noise.Excess of the residual, share of the base's misfit above the
+    noise removed, whether the model is adequate: loop_result.CandidateTest)."""
+    exc = excess(tared(problem.samples - sim, problem.tare), 1.0 / np.sqrt(w), len(problem.free))
+    share = float((S_b - S) / max(S_b - exc.dof, 1e-12 * S_b))
+    return exc, share, (not exc.any) or share >= MISFIT_SHARE
+
+
+def regrow(ext_problem, x_e, base_free, w, *, evals, seed, journal=None) -> tuple:
+    """(x, S, sim, info): the extended problem identified again as the base
+    was (identification.growing: the complex on the first window, the effect
+    held at its estimate there, then windows growing to the whole record),
+    in the metric w."""
+    st = dataclasses.replace(ext_problem, x0=ext_problem.values(x_e))
+    hold = [n for n in ext_problem.free if n not in base_free]
+    duration = float(st.times[-1] - st.times[0])
+    n = int(round(evals * max(1.0, duration / FIRST)))
+    x, info = grow(st, evals=n, hold=hold, channel_weights=w, seed=seed, journal=journal)
+    sim = st.simulate(x)
+    _, S = weighted_residual(st, sim, w)
+    return np.asarray(x, float), float(S), sim, info
 
 
 def switched_off(base, xb, ext_problem, sim_e, S_e, G, w, kw) -> Optional[dict]:

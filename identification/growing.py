@@ -20,11 +20,12 @@ Nothing of the truth is used.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
 from pathlib import Path
-from typing import Mapping, Optional
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -65,7 +66,8 @@ def windows(duration: float, first: float = FIRST, growth: float = GROWTH) -> li
 
 def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optional[Mapping[str, float]] = None,
          first: float = FIRST, growth: float = GROWTH, profile_points: int = 9, seed: int = 0,
-         journal: Optional[Path] = None) -> tuple:
+         journal: Optional[Path] = None, hold: Sequence[str] = (),
+         channel_weights: Optional[np.ndarray] = None) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -73,21 +75,34 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     likelihood's metric (1 / sigma^2 per channel: `noise_std` declared, N by
     channel name, else estimated from the first window's residual). `info`
     lists each window's S per sample (about 1 at the noise) and the
-    simulations spent."""
+    simulations spent. `hold`: variables kept at their start values
+    (problem.x0) on the first window, freed from the second on (an effect
+    the first window may not see: a bump passed later). `channel_weights`:
+    the metric given (1 / sigma^2 per column) instead of noise_std's.
+    """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
     steps = windows(duration, first, growth)
     q = truncated(problem, problem.times[0] + steps[0]) if len(steps) > 1 else problem
-    res = identify(q, max_evals=max(int(evals), len(problem.free) + 3), seed=seed, progress=False, journal=journal)
-    x = np.asarray(res.x, float)
+    hold = [n for n in hold if n in problem.free]
+    q1 = dataclasses.replace(q, free=tuple(n for n in problem.free if n not in hold),
+                             fixed={**q.fixed, **{n: problem.x0[n] for n in hold}}) if hold else q
+    res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal)
+    x1 = np.asarray(res.x, float)
     nfev = int(getattr(res, "nfev", evals))
-    w, S = _weights(q, x, noise_std)
+    if channel_weights is not None:
+        w = np.asarray(channel_weights, float)
+        S = float(np.sum(tared(q1.samples - q1.simulate(x1), q1.tare) ** 2 * w))
+    else:
+        w, S = _weights(q1, x1, noise_std)
     if profile_points > 1:
         try:
-            xp, S, pinfo = profile_polish(q, x, w, points=profile_points)
-            x, nfev = np.asarray(xp, float), nfev + int(pinfo.get("nfev", 0))
+            xp, S, pinfo = profile_polish(q1, x1, w, points=profile_points)
+            x1, nfev = np.asarray(xp, float), nfev + int(pinfo.get("nfev", 0))
         except Exception as exc:   # the complex's point stands
             log.warning("grow: profile on the first window failed: %s", exc)
+    vals = {**{n: problem.x0[n] for n in hold}, **dict(zip(q1.free, map(float, x1)))}
+    x = np.array([vals[n] for n in problem.free])
     trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
     per_window = STEP_ITERATIONS * (2 * len(x) + 2) + 1
     for t in steps[1:]:
