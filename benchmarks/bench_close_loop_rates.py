@@ -351,6 +351,7 @@ def table(summary: dict) -> str:
         cells = [f"{row['amplitude']:g}: {row['found']}/{row['records']}"
                  + (f" ({row['wrong_effect']} wrong)" if row["wrong_effect"] else "") if row["records"]
                  else f"{row['amplitude']:g}: -" for row in d["rows"]]
+        cells += [""] * (n - len(cells))   # a family with fewer amplitudes
         best = "-" if d["smallest_90"] is None else f"{d['smallest_90']:g}" + ("" if d["unit"] == "1" else f" {d['unit']}")
         lines.append(f"| {fam} | {d['unit']} | " + " | ".join(cells) + f" | {best} |")
     return "\n".join(lines)
