@@ -115,11 +115,13 @@ def table(rows: list) -> str:
     return "\n".join(lines)
 
 
-def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
-    """The diagnostic that separates the optimiser from the model: the six
-    layout-dependent variables at their true values, the four CoRs free, the
-    same pipeline. One result file per measurement, written atomically (a
-    stopped run resumes)."""
+def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
+    """Each measurement's `--repeats` records identified together
+    (identification.joint), with `--cors-only` the six layout-dependent
+    variables at their true values (the diagnostic that separates the
+    optimiser from the model), else all ten free. One result file per
+    measurement, written atomically (a stopped run resumes)."""
+    from identification.joint import own
     from identification.staged import run
     (out / "journals").mkdir(parents=True, exist_ok=True)
     rows = []
@@ -127,24 +129,27 @@ def cors_only(data: Path, out: Path, numbers, args, tare: bool) -> list:
         path = out / f"m{n:02d}.json"
         if not path.exists():
             m = load_measurement(data / f"m{n:02d}")
-            truth = load_truth(m)
-            parts = []
+            parts, truth = [], {}
             for k in range(args.repeats):   # record k: repeat k of the protocol (the chain parked elsewhere)
                 folder = (data if k == 0 else data.parent / f"data_r{k}") / f"m{n:02d}"
                 mk = load_measurement(folder)
+                tk = true_design_values(load_truth(mk))
                 pk = from_measurement(mk, "LW", window=args.window, tare=tare, objective=args.objective)
-                parts.append(drive_known(pk, true_design_values(load_truth(mk))))
+                parts.append(drive_known(pk, tk) if args.cors_only else pk)
+                truth = {**tk, **truth} if k == 0 else {**truth, own(k): tk[own(0)]}
             p = parts[0] if len(parts) == 1 else JointProblem(parts)
             c0 = time.process_time()
             try:
-                res = run(p, False, args.shrink, max_evals=args.max_evals, seed=args.seed, progress=False,
-                          restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
+                res = run(p, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
+                          progress=False, restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
+                          presolve=0 if args.cors_only else args.presolve,
                           journal=out / "journals" / f"m{n:02d}.jsonl")
                 r = res.to_dict()
                 r.update({"cpu_s": time.process_time() - c0, "number": n, "layout": m.layout,
                           "measurement": res.problem.name, "measurement_dir": str(data / f"m{n:02d}"),
                           "records": len(parts)})
-                r["f_truth"] = float(res.problem(_truth_x(truth, res.problem.free)))   # at the window used
+                # at the window used
+                r["f_truth"] = float(res.problem(np.array([truth[q] for q in res.problem.free])))
             finally:
                 for q in parts:
                     q.sim.close()
@@ -191,6 +196,9 @@ def main(argv=None) -> int:
                          "on the CoRs, Levenberg-Marquardt on all ten (--presolve, --max-evals, --refine-evals)")
     ap.add_argument("--shrink", action="store_true",
                     help="identification.windowing: shorter windows (1.5, 1.2, 1.0 s) while a CoR is rough")
+    ap.add_argument("--grown", action="store_true",
+                    help="identification.identify_grown: the complex on the first 0.3 s (--max-evals), then "
+                         "Levenberg-Marquardt over growing windows (--refine-evals after it)")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
@@ -211,6 +219,8 @@ def main(argv=None) -> int:
         runs = base if args.objective == "pointwise" else base / args.objective   # the set is shared
         if args.staged:
             runs, label = runs / "staged", label + ", staged"
+        if args.grown:
+            runs, label = runs / "grown", label + ", grown"
         if args.shrink and not args.cors_only:
             runs, label = runs / "shrink", label + ", shorter windows"
         data, out = base / "data", base / "campaign"
@@ -219,21 +229,23 @@ def main(argv=None) -> int:
         gen = generate_set("recovery", data, numbers, workers=args.workers, protocol=protocol, progress=True,
                            log=lambda msg: print(msg, file=sys.stderr), fmu=fmu)
         gen_cpu = sum(r.get("cpu_s", 0.0) for r in gen if "cpu_s" in r)
-        if args.cors_only:
+        if args.cors_only or args.repeats > 1:
             for k in range(1, args.repeats):
                 generate_set("recovery", base / f"data_r{k}", numbers, workers=args.workers, protocol=protocol,
                              progress=True, repeat=k, log=lambda msg: print(msg, file=sys.stderr), fmu=fmu)
             if args.repeats > 1:
                 label += f", {args.repeats} records"
-            folder = "cors_only" if args.repeats == 1 else f"cors_only_k{args.repeats}"
-            if args.shrink:
+            folder = "cors_only" if args.cors_only else "ten_free"
+            folder += "" if args.repeats == 1 else f"_k{args.repeats}"
+            if args.shrink and args.cors_only:
                 folder, label = folder + "_shrink", label + ", shorter windows"
-            results = cors_only(data, runs / folder, numbers, args, tare)
+            results = joint_records(data, runs / folder, numbers, args, tare)
             cache = {r["measurement"]: r["f_truth"] for r in results}
             rows = rows_of(results, data, args.window, tare, cache, args.objective)
             entry = {"rows": rows, "summary": summary(rows), "wall_s": time.time() - t0}
-            report["protocols"][label + " (CoRs only)"] = entry
-            print(f"\n## {label}, CoRs only\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
+            label += " (CoRs only)" if args.cors_only else " (ten free)"
+            report["protocols"][label] = entry
+            print(f"\n## {label}\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
             if args.json:
                 write_json_atomic(args.json, report)
             continue
@@ -243,7 +255,7 @@ def main(argv=None) -> int:
                                window=args.window, tare=tare, presolve=args.presolve,
                                refine_evals=args.refine_evals, restarts=args.restarts, uncertainty=True,
                                progress=True, objective=args.objective, staged=args.staged,
-                               shrink=args.shrink)
+                               shrink=args.shrink, grown=args.grown)
         cache = (report["protocols"].get(label) or {}).get("f_truth", {})
         results = [r for r in results if r.get("number") in numbers]
         rows = rows_of(results, data, args.window, tare, cache, args.objective)

@@ -43,6 +43,7 @@ class Task:
     objective: str = "pointwise"  # from_measurement(objective=...)
     staged: bool = False         # identification.staged instead of identify
     shrink: bool = False         # identification.windowing: shorter windows while a CoR is rough
+    grown: bool = False          # identification.identify_grown: the complex on the first 0.3 s, windows grown
 
     @property
     def key(self) -> str:
@@ -68,7 +69,7 @@ def run_task(task: Task) -> dict:
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
     c0 = time.process_time()
     try:
-        res = run(problem, task.staged, task.shrink, max_evals=task.max_evals, seed=task.seed,
+        res = run(problem, task.staged, task.shrink, task.grown, max_evals=task.max_evals, seed=task.seed,
                   journal=task.journal_path, progress=False, restarts=task.restarts, presolve=task.presolve,
                   refine_evals=task.refine_evals, uncertainty=task.uncertainty)
     finally:
@@ -86,7 +87,7 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
                  window: Optional[float] = None, settle: Optional[float] = None, free: Optional[tuple] = None,
                  progress: bool = True, client=None, tare: bool = False, restarts: int = 0, presolve: int = 0,
                  refine_evals: int = 0, uncertainty: bool = False, objective: str = "pointwise",
-                 staged: bool = False, shrink: bool = False) -> list[dict]:
+                 staged: bool = False, shrink: bool = False, grown: bool = False) -> list[dict]:
     """Run what is not finished yet; return all results (finished before or now)."""
     from lss_fmu.design import parse_model
     from lss_fmu.measurement import find_measurements
@@ -97,11 +98,13 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
         raise ValueError(f"restarts = {restarts}: must be 0 or more")
     if shrink and not uncertainty:
         raise ValueError("shrink needs uncertainty: the roughness of the CoRs at the optimum decides the window")
+    if staged and grown:
+        raise ValueError("choose one pipeline: staged or grown, not both")
     folders = find_measurements(data_dir)
     if not folders:
         raise FileNotFoundError(f"{data_dir} holds no measurement (no meta.json in it or below)")
     tasks = [Task(str(p), m, str(out), max_evals, seed, window, settle, free, tare, int(restarts), int(presolve),
-                  int(refine_evals), bool(uncertainty), objective, bool(staged), bool(shrink))
+                  int(refine_evals), bool(uncertainty), objective, bool(staged), bool(shrink), bool(grown))
              for p in folders for m in models]
     twice = sorted({t.key for t in tasks if sum(u.key == t.key for u in tasks) > 1})
     if twice:  # results are filed by folder name
@@ -113,7 +116,7 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
                                               "tare": tare, "restarts": int(restarts), "presolve": int(presolve),
                                               "refine_evals": int(refine_evals), "uncertainty": bool(uncertainty),
                                               "objective": objective, "staged": bool(staged),
-                                              "shrink": bool(shrink),
+                                              "shrink": bool(shrink), "grown": bool(grown),
                                               "tasks": [t.key for t in tasks]})
     todo = [t for t in tasks if not t.result_path.exists()]
     bar = None

@@ -67,7 +67,7 @@ def windows(duration: float, first: float = FIRST, growth: float = GROWTH) -> li
 def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optional[Mapping[str, float]] = None,
          first: float = FIRST, growth: float = GROWTH, profile_points: int = 9, seed: int = 0,
          journal: Optional[Path] = None, hold: Sequence[str] = (),
-         channel_weights: Optional[np.ndarray] = None) -> tuple:
+         channel_weights: Optional[np.ndarray] = None, keep_points: bool = False) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -79,6 +79,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     (problem.x0) on the first window, freed from the second on (an effect
     the first window may not see: a bump passed later). `channel_weights`:
     the metric given (1 / sigma^2 per column) instead of noise_std's.
+    `keep_points`: each window's entry also holds its point (`x`), from
+    which a shorter window can be taken up (identification.identify_grown).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -104,6 +106,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     vals = {**{n: problem.x0[n] for n in hold}, **dict(zip(q1.free, map(float, x1)))}
     x = np.array([vals[n] for n in problem.free])
     trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
+    if keep_points:
+        trail[0]["x"] = x.tolist()
     per_window = STEP_ITERATIONS * (2 * len(x) + 2) + 1
     for t in steps[1:]:
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
@@ -113,6 +117,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
             x = np.asarray(r.x, float)
         # refine's f is S in the same metric at its point: no simulation more
         trail.append({"window_s": t, "S_per_sample": float(r.f) / q.samples.size})
+        if keep_points:
+            trail[-1]["x"] = x.tolist()
     return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0}
 
 

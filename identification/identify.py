@@ -154,6 +154,7 @@ class IdentificationResult:
     presolved: Optional[dict] = None  # the first stage (identify(presolve=...)): f0, f, evaluations, values
     intervals: Optional[list] = None  # identification.uncertainty.Interval per free variable
     windows: Optional[list] = None   # identification.windowing: every window tried, its f and troubles
+    grown: Optional[list] = None     # identification.identify_grown: each growing window's S per sample
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -173,6 +174,7 @@ class IdentificationResult:
             "seconds": self.seconds, "window_s": float(p.times[-1]),
             "protocol": p.protocol.to_meta(), "tolerance": p.tolerance,
             "refined": self.refined, "presolved": self.presolved, "windows": self.windows,
+            "grown": self.grown,
             "interval": None if self.intervals is None else {
                 symbol(iv.name): iv.to_dict() for iv in self.intervals},
         }

@@ -46,12 +46,19 @@ FALLBACK_RESTARTS = 2
 FALLBACK_PRESOLVE = 150   # evaluations of the fallback's first complex over the six (identify(presolve=...))
 
 
-def run(problem: IdentificationProblem, staged: bool = False, shrink: bool = False, **kw):
+def run(problem: IdentificationProblem, staged: bool = False, shrink: bool = False, grown: bool = False, **kw):
     """identify(problem, **kw), or identify_staged with the same budgets
-    (`presolve`: the first stage's simulations, default STAGE_EVALS): the one
-    door of the campaign and the command line. `shrink`: either of them
-    through identification.windowing (shorter windows while a CoR is rough)."""
+    (`presolve`: the first stage's simulations, default STAGE_EVALS), or
+    with `grown` identify_grown (`max_evals`: the complex's on the first
+    window): the one door of the campaign and the command line. `shrink`:
+    any of them through identification.windowing (shorter windows while a
+    CoR is rough; the grown one from its own trail)."""
     from .identify import identify
+    if grown:
+        if staged:
+            raise ValueError("choose one pipeline: staged or grown, not both")
+        from .identify_grown import identify_grown
+        return identify_grown(problem, shrink=shrink, **kw)
     if shrink:
         from .windowing import identify_windowed
         return identify_windowed(problem, lambda q, **k: run(q, staged, **k), **kw)

@@ -31,6 +31,9 @@ def register(sub, common) -> None:
     ap.add_argument("--staged", action="store_true",
                     help="the layout-dependent variables by Levenberg-Marquardt first, the complex on the CoRs, "
                          "then Levenberg-Marquardt on everything (identification.staged)")
+    ap.add_argument("--grown", action="store_true",
+                    help="the complex on the record's first 0.3 s (--max-evals), then Levenberg-Marquardt over "
+                         "windows growing to the whole record (identification.identify_grown)")
     ap.add_argument("--shrink", action="store_true",
                     help="when a CoR is rough at the optimum (a record that turns chaotic) or the fit stays above "
                          "the noise, identify again on the first 1.5, 1.2, 1.0 s (identification.windowing)")
@@ -54,7 +57,7 @@ def run_campaign(args) -> int:
                        window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
                        tare=args.tare, restarts=args.restarts, presolve=args.presolve,
                        refine_evals=args.refine_evals, uncertainty=True, objective=args.objective,
-                       staged=args.staged, shrink=args.shrink)
+                       staged=args.staged, shrink=args.shrink, grown=args.grown)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

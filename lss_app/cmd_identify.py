@@ -7,6 +7,8 @@ from pathlib import Path
 
 
 REFINE_EVALS = 100   # Levenberg-Marquardt after the complex (identification.identify)
+MAX_EVALS = 5000     # the paper's limit
+GROWN_EVALS = 400    # the complex on the first 0.3 s of --grown (docs/identification.md)
 
 
 def register(sub, common) -> None:
@@ -19,7 +21,9 @@ def register(sub, common) -> None:
                          "point its own (identification.joint)")
     ap.add_argument("--model", required=True, help="contact model: HC, HW, LW, LN, GZ or FL")
     ap.add_argument("--out", required=True, help="output folder")
-    ap.add_argument("--max-evals", type=int, default=5000)
+    ap.add_argument("--max-evals", type=int, default=None,
+                    help=f"the complex's evaluations (default {MAX_EVALS}; with --grown {GROWN_EVALS}, on the "
+                         f"first window)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=1, help="parallel evaluations (Complex-RFP)")
     ap.add_argument("--free", default=None, help="design variables to identify, e.g. e_JA,e_JR,e_SW,e_RW "
@@ -37,6 +41,11 @@ def register(sub, common) -> None:
                     help="Levenberg-Marquardt on the layout-dependent variables first (--presolve simulations, "
                          "default 80), the complex on the CoRs alone, then Levenberg-Marquardt on everything "
                          "(identification.staged; pointwise or likelihood objective)")
+    ap.add_argument("--grown", action="store_true",
+                    help="the complex on the record's first 0.3 s (--max-evals evaluations there), its profile, "
+                         "then Levenberg-Marquardt over windows growing to the whole record; with --shrink a "
+                         "shorter window is taken up from the grown point at its length "
+                         "(identification.identify_grown; pointwise or likelihood objective)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
     ap.add_argument("--shrink", action="store_true",
@@ -59,6 +68,8 @@ def run(args) -> int:
 
     if args.restarts < 0:
         raise ValueError(f"--restarts {args.restarts}: must be 0 or more")
+    if args.max_evals is None:
+        args.max_evals = GROWN_EVALS if args.grown else MAX_EVALS
     if args.max_evals < 1:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
     if args.refine_evals < 0:
@@ -77,7 +88,9 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "identify.log"))
-    res = identify_or_staged(problem, args.staged, args.shrink, max_evals=args.max_evals, seed=args.seed,
+    if args.staged and args.grown:
+        raise ValueError("--staged and --grown: choose one pipeline")
+    res = identify_or_staged(problem, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
                              journal=out / "journal.jsonl", progress=not args.no_progress, workers=args.workers,
                              restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
                              presolve=args.presolve)

@@ -1,0 +1,131 @@
+"""Identification over a growing window, as a pipeline of `lss identify`
+(issue 17: the paper's ten variables free).
+
+With all ten design variables free the published complex over a whole
+start-stop stops in another valley (m01: 2.4 x f(truth) after about 1500
+CPU-s), and the staged pipeline's first stage lands the drive in a wrong
+valley where the CoRs' start values ask it for what only the CoRs can give
+(m13 with three records: 30-50 x f(truth), e_JA 0.56 off). The close loop's
+base (identification.growing) avoids both: the complex where the record is
+still a smooth function of the design (its first 0.3 s), then
+Levenberg-Marquardt carried along windows growing to the whole record.
+
+`identify_grown` wraps that into an IdentificationResult: the refinement and
+the intervals on the whole record after growing, and, with `shrink`, the
+window chosen as `windowing.identify_windowed` chooses it (while a CoR is
+rough or the fit above the declared noise, the next shorter window of
+LADDER), but taken up from the grown trail's own point at that length rather
+than from the full window's: past the onset of chaos the trail may already
+have been carried off, and the point before it has not. Nothing of the
+truth is used.
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from .growing import FIRST, grow
+from .problem import LINEARISABLE
+from .windowing import LADDER, troubles, truncated
+
+log = logging.getLogger(__name__)
+
+PROFILE_POINTS = 9   # the profile of the least-determined variable on the first window (growing.grow)
+
+
+def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
+                   progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 100,
+                   uncertainty: bool = False, presolve: int = 0, shrink: bool = False,
+                   ladder: Sequence[float] = LADDER, first: float = FIRST):
+    """The problem (an IdentificationProblem or a joint one) identified over
+    a growing window: `max_evals` complex evaluations on the first `first`
+    seconds, the profile there, Levenberg-Marquardt over growing windows in
+    the declared noise's metric (the likelihood's; else the first window's
+    residual), then `refine_evals` simulations of refinement and the
+    intervals on the whole record. `shrink`: shorter windows of `ladder`
+    while `windowing.troubles` reports any (needs `uncertainty`). Returns an
+    identify.IdentificationResult (`grown`: each window's S per sample;
+    `windows`: the windows tried when shrinking). `workers`, `restarts` and
+    `presolve` are accepted for the common signature and not used: the
+    first window's complex is short."""
+    from .identify import IdentificationResult, _local, _safe_H
+    if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
+        raise ValueError(f"grown identification: the {problem.objective} objective is not a sum of squares "
+                         f"(use one of {', '.join(LINEARISABLE)})")
+    if int(max_evals) < 1:
+        raise ValueError(f"grown identification: max_evals = {max_evals} must be at least 1")
+    if int(refine_evals) < 0:
+        raise ValueError(f"grown identification: refine_evals = {refine_evals} must be 0 or more")
+    if shrink and not uncertainty:
+        raise ValueError("grown identification with shrink needs uncertainty=True: the roughness of the CoRs "
+                         "decides the window")
+    del workers, restarts, presolve
+    t0 = time.time()
+    x0 = problem.x0_vector()
+    if x0 is None:
+        x0 = np.array([0.5 * (lo + hi) for lo, hi in problem.bounds_array])
+    f0 = float(problem(x0))
+    noise = getattr(problem, "noise", None)
+    w = None if noise is None else 1.0 / np.asarray(noise, float) ** 2
+    x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
+                   channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True)
+    f = float(problem(x))
+    local = _local(problem, x, f, int(refine_evals), uncertainty, journal)
+    if local.get("f", np.inf) < f:
+        x, f = np.asarray(local["x"], float), float(local["f"])
+    nfev = int(info["nfev"]) + 1 + int((local.get("refined") or {}).get("nfev", 0))
+    trail = [{k: v for k, v in t.items() if k != "x"} for t in info["windows"]]
+    message = (f"grown over {len(trail)} windows to {trail[-1]['window_s']:.3g} s "
+               f"(S per sample {trail[0]['S_per_sample']:.3g} on the first, {trail[-1]['S_per_sample']:.3g} "
+               f"on the last)")
+    if local.get("refined"):
+        message += f"; refined to f = {f:.4g} in {local['refined']['nfev']} simulations"
+    res = IdentificationResult(problem, np.asarray(x0, float), f0, _safe_H(problem, x0), np.asarray(x, float), f,
+                               _safe_H(problem, x), nfev, nfev, 0, message, np.array([f0, f]), time.time() - t0,
+                               refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
+    if not shrink:
+        return res
+    return _shrunk(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
+
+
+def _shrunk(problem, res, trail, ladder, refine_evals, journal, t0):
+    """`res`, or the first shorter window of `ladder` without troubles (else
+    the shortest), each refined from the trail's point at the longest grown
+    window not beyond it."""
+    from .identify import _local, _safe_H
+    full = float(problem.times[-1])
+    tried = [{"window_s": full, "f": float(res.f), "troubles": troubles(res), "seconds": float(res.seconds)}]
+    steps = [s for s in sorted({float(s) for s in ladder}, reverse=True) if s < full - 1e-9]
+    start_t = float(problem.times[0])
+    for s in steps:
+        if not tried[-1]["troubles"]:
+            break
+        t1 = time.time()
+        below = [t for t in trail if start_t + t["window_s"] <= s + 1e-9] or trail[:1]
+        x_start = np.asarray(below[-1]["x"], float)
+        q = truncated(problem, s)
+        jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{s:g}.jsonl")
+        f_start = float(q(x_start))
+        local = _local(q, x_start, f_start, refine_evals, True, jr)
+        x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f_start \
+            else (x_start, f_start)
+        extra = int((local.get("refined") or {}).get("nfev", 0)) + 1
+        res = dataclasses.replace(res, problem=q, x=x, f=f, H=_safe_H(q, x), f0=float(q(res.x0)),
+                                  H0=_safe_H(q, res.x0), nfev=res.nfev + extra, evaluated=res.evaluated + extra,
+                                  refined=local.get("refined"), intervals=local.get("intervals"),
+                                  history_f=np.append(res.history_f, f))
+        tried.append({"window_s": float(q.times[-1]), "f": f, "troubles": troubles(res),
+                      "seconds": time.time() - t1, "from_window_s": float(below[-1]["window_s"])})
+        log.info("%s: window %.3g s from the grown point at %.3g s, f = %.4g%s", problem.name, s,
+                 below[-1]["window_s"], f, f" ({', '.join(tried[-1]['troubles'])})" if tried[-1]["troubles"] else "")
+    sizes = ", ".join(f"{t['window_s']:g}" for t in tried)
+    return dataclasses.replace(res, windows=tried, seconds=time.time() - t0,
+                               message=res.message + (f"; windows {sizes} s" if len(tried) > 1 else ""))
+
+
+__all__ = ["identify_grown"]
