@@ -43,6 +43,8 @@ log = logging.getLogger(__name__)
 FIRST = 0.3        # s, the first window: smooth on every clean release transient tried
 GROWTH = 1.45      # each window this much longer than the one before (0.3, 0.44, 0.63, 0.91, ... s)
 STEP_ITERATIONS = 3  # Levenberg-Marquardt iterations (central Jacobians) a window at most
+UNSEEN_STEP = 0.05   # share of a variable's range moved to see whether the first window sees it ...
+UNSEEN_DS = 1e-6     # ... S changing by less than this (a chi^2 unit is 1): not seen at all
 
 
 def windows(duration: float, first: float = FIRST, growth: float = GROWTH) -> list:
@@ -67,7 +69,8 @@ def windows(duration: float, first: float = FIRST, growth: float = GROWTH) -> li
 def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optional[Mapping[str, float]] = None,
          first: float = FIRST, growth: float = GROWTH, profile_points: int = 9, seed: int = 0,
          journal: Optional[Path] = None, hold: Sequence[str] = (),
-         channel_weights: Optional[np.ndarray] = None, keep_points: bool = False) -> tuple:
+         channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
+         reset_unseen: bool = False) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -81,6 +84,13 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     the metric given (1 / sigma^2 per column) instead of noise_std's.
     `keep_points`: each window's entry also holds its point (`x`), from
     which a shorter window can be taken up (identification.identify_grown).
+    `reset_unseen`: a variable the first window cannot see (S moves by less
+    than UNSEEN_DS when it moves by UNSEEN_STEP of its range either way) goes
+    back to its start value before the windows grow: the complex left it
+    wherever its last point happened to put it (a start-stop's first 0.3 s,
+    the drive saturated: v_ref, K_P and K_I move nothing, and K_P was left
+    1240 above the truth, which the stop at 1 s could not undo). `info`
+    lists them (`unseen`).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -103,6 +113,10 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
             x1, nfev = np.asarray(xp, float), nfev + int(pinfo.get("nfev", 0))
         except Exception as exc:   # the complex's point stands
             log.warning("grow: profile on the first window failed: %s", exc)
+    unseen = []
+    if reset_unseen:
+        x1, unseen = _reset_unseen(q1, x1, w, S)
+        nfev += 2 * len(q1.free)
     vals = {**{n: problem.x0[n] for n in hold}, **dict(zip(q1.free, map(float, x1)))}
     x = np.array([vals[n] for n in problem.free])
     trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
@@ -119,7 +133,34 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         trail.append({"window_s": t, "S_per_sample": float(r.f) / q.samples.size})
         if keep_points:
             trail[-1]["x"] = x.tolist()
-    return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0}
+    return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0, "unseen": unseen}
+
+
+def _reset_unseen(q, x, w, S) -> tuple:
+    """(x with the variables q cannot see at their start values, their
+    names): see grow(reset_unseen=...)."""
+    x0 = q.x0_vector()
+    if x0 is None:
+        return x, []
+    x, out = np.array(x, float), []
+    for i, (name, (lo, hi)) in enumerate(zip(q.free, q.bounds_array)):
+        h = UNSEEN_STEP * (hi - lo)
+        moved = []
+        for xi in (min(x[i] + h, hi), max(x[i] - h, lo)):
+            xt = x.copy()
+            xt[i] = xi
+            try:
+                moved.append(abs(float(np.sum(tared(q.samples - q.simulate(xt), q.tare) ** 2 * w)) - S))
+            except Exception:   # a point that does not simulate is seen
+                moved.append(np.inf)
+        if max(moved) < UNSEEN_DS:
+            out.append(name)
+    for name in out:
+        i = q.free.index(name)
+        x[i] = x0[i]
+    if out:
+        log.info("grow: %s unseen on the first window: back to their start values", ", ".join(out))
+    return x, out
 
 
 def _weights(q, x, noise_std) -> tuple:

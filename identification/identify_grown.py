@@ -9,6 +9,9 @@ valley where the CoRs' start values ask it for what only the CoRs can give
 base (identification.growing) avoids both: the complex where the record is
 still a smooth function of the design (its first 0.3 s), then
 Levenberg-Marquardt carried along windows growing to the whole record.
+What the first window cannot see at all (a start-stop's drive, saturated for
+its first 0.3 s) is put back to its start value, the nominal one of
+meta.json, before the windows grow (growing.grow, `reset_unseen`).
 
 `identify_grown` wraps that into an IdentificationResult: the refinement and
 the intervals on the whole record after growing, and, with `shrink`, the
@@ -73,7 +76,7 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     noise = getattr(problem, "noise", None)
     w = None if noise is None else 1.0 / np.asarray(noise, float) ** 2
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
-                   channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True)
+                   channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True)
     f = float(problem(x))
     local = _local(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
@@ -83,6 +86,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     message = (f"grown over {len(trail)} windows to {trail[-1]['window_s']:.3g} s "
                f"(S per sample {trail[0]['S_per_sample']:.3g} on the first, {trail[-1]['S_per_sample']:.3g} "
                f"on the last)")
+    if info.get("unseen"):
+        message += f"; unseen on the first window, started from their start values: {', '.join(info['unseen'])}"
     if local.get("refined"):
         message += f"; refined to f = {f:.4g} in {local['refined']['nfev']} simulations"
     res = IdentificationResult(problem, np.asarray(x0, float), f0, _safe_H(problem, x0), np.asarray(x, float), f,
