@@ -289,7 +289,7 @@ def summarise(results: list) -> dict:
             rows.append({"amplitude": a, "records": len(rs), "found": len(hit), "wrong_effect": len(wrong),
                          "rate": len(hit) / len(rs) if rs else None,
                          "outcomes": {o: sum(r["outcome"] == o for r in rs) for o in
-                                      ("confirmed", "not in the catalogue", "nothing significant")}})
+                                      ("confirmed", "undecided", "not in the catalogue", "nothing significant")}})
         ok = [row["amplitude"] for row in rows if row["rate"] is not None and row["records"] >= 5
               and row["rate"] >= 0.9]
         det[fam] = {"unit": unit, "what": what, "rows": rows, "smallest_90": min(ok) if ok else None}
@@ -303,7 +303,7 @@ def summarise(results: list) -> dict:
     cpu = [r["cpu_s"] for r in results if "cpu_s" in r]
     return {"clean": {"records": len(clean), "false_confirmations": false,
                       "outcomes": {o: sum(r["outcome"] == o for r in clean) for o in
-                                   ("confirmed", "not in the catalogue", "nothing significant")},
+                                   ("confirmed", "undecided", "not in the catalogue", "nothing significant")},
                       "by_source": {s: sum(r["source"] == s for r in clean) for s in ("synthetic", "rig")},
                       "protocols": sorted({r.get("protocol", "release") for r in clean}),
                       "layouts": sorted({str(r.get("layout")) for r in clean})},

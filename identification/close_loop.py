@@ -245,7 +245,7 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
         log.warning("departures outside the catalogue failed: %s", exc)
         rnd.dropped.append({"effect": "(departures)", "stage": "fit", "reason": str(exc)[:300]})
     # 3. the leading candidates through the extended identification and the tests
-    better = None
+    better, passed = None, None
     for fit in fits[:max(1, test_max)]:
         try:
             t = examine_candidate(base, x, fit, att, S_b, w, m, counts.get(fit.score.effect, 1), max_evals=max_evals,
@@ -261,8 +261,10 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
             if better is None or t.base_alt[1] < better[1]:
                 better = (t.base_alt[0], t.base_alt[1], t.effect)
             break
+        if passed is not None:
+            break   # the rival of the one that passed, examined (identification.rivals)
         if t.supported and t.adequate:
-            break   # (one that passes but leaves the model above the noise: the next may do better)
+            passed = t   # (one that passes but leaves the model above the noise: the next may do better)
     if better is not None:
         return rnd, better
     decide(rnd, base, r_b, s, w)

@@ -96,7 +96,7 @@ class Round:
     residual: object = field(default=None, repr=False)
     refined: dict = field(default_factory=dict)   # the local refinement of the extension: f before/after, runs
     # issue 18: the evidence
-    outcome: str = ""                              # confirmed, not in the catalogue, nothing significant
+    outcome: str = ""                              # confirmed, undecided, not in the catalogue, nothing significant
     noise: Optional[Noise] = None
     excess: object = None                          # noise.Excess of the refitted base
     base_refined: dict = field(default_factory=dict)
@@ -109,6 +109,7 @@ class Round:
     provisional: bool = False    # a candidate passed the tests but its extension stays above the noise: confirmed
                                  # only if a later round's model (with it) reaches the noise
     verdict_if_confirmed: str = field(default="", repr=False)
+    rivalry: Optional[dict] = None   # two candidates that both passed, compared (identification.rivals)
 
     @property
     def evidence(self) -> Optional[CandidateTest]:
@@ -142,7 +143,7 @@ class Round:
             "excess": None if self.excess is None else self.excess.to_dict(),
             "tests": [t.to_dict() for t in self.tests],
             "departures": [d.to_dict() for d in self.departures],
-            "dropped": self.dropped,
+            "dropped": self.dropped, "rivalry": self.rivalry,
             "attribution": self.attribution.to_dict(),
         }
 

@@ -1,5 +1,6 @@
-"""The verdict of a closed-loop round (issue 18): confirmed, not in the
-catalogue, or nothing significant, each with its evidence."""
+"""The verdict of a closed-loop round (issue 18): confirmed, undecided
+between two candidates, not in the catalogue, or nothing significant, each
+with its evidence."""
 from __future__ import annotations
 
 import logging
@@ -14,6 +15,7 @@ from .departures import beyond
 from .locate import localise, where_text
 from .loop_result import CandidateTest, Round
 from .problem import IdentificationProblem, weighted_residual
+from .rivals import compare, passing
 
 log = logging.getLogger(__name__)
 
@@ -26,6 +28,8 @@ def stats_text(t: CandidateTest) -> str:
 
 def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.ndarray) -> None:
     """The verdict from the tests (module docstring)."""
+    if _rivals(rnd, base, r_b, s, w):
+        return
     supported = [t for t in rnd.tests if t.supported]
     sup = next((t for t in supported if t.adequate), supported[0] if supported else None)
     deps = [d for d in rnd.departures if d.counts]
@@ -49,7 +53,10 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         eff = CATALOGUE[sup.effect]
         confirmed = (f"{eff.title} ({sup.effect}, {sup.label}) confirmed: {stats_text(sup)} ({noise}); "
                      f"f from {rnd.f_base:.4g} to {sup.f:.4g}")
-        if sup.adequate:
+        rival = rnd.rivalry if rnd.rivalry and rnd.rivalry["preferred"] == sup.effect else None
+        if rival:
+            confirmed += "; " + rival["text"]
+        if sup.adequate and (rival is None or rival["at_noise"]):
             rnd.confirmed, rnd.outcome, rnd.verdict = True, "confirmed", confirmed
             return
         # it passes every test but the model with it stays above the noise: a wrong effect taking a
@@ -65,6 +72,8 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
                        f"{noise}) but the model with it stays above the noise (mean square / noise up to "
                        f"{float(ratio[j]):.2f} on {FORCE_CHANNELS[j]}{share}); f from {rnd.f_base:.4g} to {sup.f:.4g}. "
                        f"Where the base's residual is: {where_text(rnd.location)}")
+        if rival:
+            rnd.verdict += f"; {sup.effect} {rival['text']}"
         return
     rnd.confirmed = False
     loc = localise(base, r_b, s, w)
@@ -118,3 +127,35 @@ def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
             sup.why_not.append(f"a disturbance outside the catalogue remains beyond it ({d.label}: Bonferroni p = "
                                f"{t.p_adj:.2g}, dBIC {t.dbic:+.1f} on the extended residual)")
             return
+
+
+def _rivals(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.ndarray) -> bool:
+    """The first candidate that passes and is adequate, and the best other one
+    that passes (identification.rivals): the one BIC prefers decisively stays
+    and the other is marked as beaten (a preferred one above the noise is held
+    provisional by decide); if neither is preferred the round ends undecided
+    (True), nothing confirmed."""
+    ok = passing(rnd.tests)
+    if not ok:
+        return False
+    others = [t for t in rnd.tests if t.supported and t is not ok[0]]
+    if not others:
+        return False
+    rv = compare(ok[0], min(others, key=lambda t: t.S), len(base.free))
+    rnd.rivalry = {"first": rv.first.effect, "second": rv.second.effect, "dbic_first": rv.dbic,
+                   "preferred": None if rv.preferred is None else rv.preferred.effect,
+                   "at_noise": rv.winner is not None, "text": rv.text()}
+    if rv.preferred is not None:
+        rv.loser.supported = False
+        rv.loser.why_not.append(f"{rv.preferred.effect} ({rv.preferred.label}) explains the record better: dBIC "
+                                f"{abs(rv.dbic):+.1f} between them")
+        return False
+    loc = localise(base, r_b, s, w)
+    rnd.confirmed, rnd.outcome, rnd.location = False, "undecided", loc
+    a, b = rv.first, rv.second
+    rnd.effect, rnd.problem_extended, rnd.x_extended = a.effect, a.problem, a.x
+    rnd.f_extended, rnd.H_extended, rnd.identified = a.f, a.H, a.identified
+    rnd.amplitude = a.amplitude
+    rnd.verdict = (f"undecided: {rv.text()}. {a.effect}: {stats_text(a)}, f from {rnd.f_base:.4g} to {a.f:.4g}; "
+                   f"{b.effect}: {stats_text(b)}, f to {b.f:.4g}. Where the base's residual is: {where_text(loc)}")
+    return True

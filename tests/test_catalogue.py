@@ -26,3 +26,24 @@ def test_a_bump_is_probed_at_every_joint_and_every_length():
         assert ext.x0["effects.track_bump.length"] == ln and ext.x0["effects.track_bump.height"] == 0.0015
         lo, hi = ext.free["effects.track_bump.length"]
         assert lo < ln < hi
+
+
+def test_a_joint_play_is_probed_on_a_ladder_of_gaps():
+    """A 1 um play moved a steady record's misfit from 126 to 0.3 per sample,
+    a 2 um one to 133: the answer to the gap is a valley about 20 % wide, which
+    one 0.2 mm probe never ranked. The rungs cover 0.3 um to 2 mm without a
+    hole, each extension stays on its own rung (one valley) and inside the
+    FMU's range (5 mm)."""
+    clr = CATALOGUE["joint_clearance"]
+    hyps = clr.hypotheses(_ctx([0.0, 4.0]))
+    gaps = [h.probes[0].params["effects.joint_clearance.gap"] for h in hyps]
+    assert gaps == sorted(gaps) and gaps[0] <= 3e-7 and gaps[-1] >= 2e-3
+    assert max(b / a for a, b in zip(gaps, gaps[1:])) <= clr.RATIO * (1 + 1e-9)
+    for h, g in zip(hyps, gaps):
+        assert h.probes[0].scale == g and f"{1e6 * g:.3g} um" in h.label
+        ext = clr.extension(h, np.array([10.0]))              # a wild linear estimate is held on the rung
+        lo, hi = ext.free["effects.joint_clearance.gap"]
+        assert 0 < lo < g < hi <= 5e-3 and lo <= ext.x0["effects.joint_clearance.gap"] <= hi
+    # neighbouring rungs' extensions meet: every gap in the range is some rung's
+    spans = [clr.extension(h, np.array([g])).free["effects.joint_clearance.gap"] for h, g in zip(hyps, gaps)]
+    assert all(a[1] >= b[0] for a, b in zip(spans, spans[1:]))

@@ -150,6 +150,27 @@ def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
         assert not t.supported or t.effect == "mass" or not t.adequate, (t.effect, t.status)
 
 
+@pytest.mark.parametrize("seed, transducer", [(435425658, 26)])   # the benchmark's joint_clearance_a3_r04
+def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transducer):
+    """A 1 um play in every joint: a track bump at one joint, identified with
+    the CoRs, removed 85 % of the misfit and was confirmed (benchmark record
+    joint_clearance_a3_r04 of commit 59b3969). Now the play is probed on a
+    ladder of gaps (catalogue.JointClearance) and the candidate after the first
+    that passes is examined too (identification.rivals): here the play passes
+    as well; BIC prefers the bump, but its model stays above the noise, so it
+    is only held provisional. What must hold: never the bump."""
+    params = {"effects.joint_clearance.gap": 1e-6}
+    problem, _ = effect_case([], seed, params=params, transducer=transducer)
+    res = _loop(problem, **QUICK)
+    rnd = res.rounds[0]
+    _record("clearance_1um_a3_r04", res, truth=params)
+    assert res.found in ([], ["joint_clearance"]), rnd.verdict
+    assert "joint_clearance" in [t.effect for t in rnd.tests], [t.effect for t in rnd.tests]
+    if res.found == []:   # the play lost to, or tied with, something whose model stays above the noise
+        assert rnd.rivalry and "joint_clearance" in (rnd.rivalry["first"], rnd.rivalry["second"]), rnd.verdict
+        assert not rnd.rivalry["at_noise"] and "dBIC" in rnd.verdict
+
+
 # an out-of-round wheel and zero errors on two channels (seed 32 passed too when written, before issue 18)
 @pytest.mark.parametrize("seed", [31])
 def test_two_effects_are_found_in_turn(fmu_file, seed):
