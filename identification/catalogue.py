@@ -179,7 +179,7 @@ class JointClearance(Effect):
     clean model's misfit from 126 to 0.3 per sample at 1 um but to 133 at 2 um
     and 112 at 0.1 um (the valley about 20 % wide in the gap), so the single
     0.2 mm probe never ranked a 1 um play among the candidates and a track bump
-    took its misfit (benchmarks/results/close_loop_rates). Each gap's extension
+    took its misfit (benchmarks/results/close_loop_rates_fb9d67b). Each gap's extension
     stays within its rung, where the landscape is a single valley."""
     name, title, unit = "joint_clearance", "clearance in the cart-to-cart joints", "m"
     RATIO = 1.5                                   # between rungs

@@ -4,17 +4,18 @@ A candidate that passes every test only shows that the base is missing
 *something* its parameters can imitate. A 1 um play in every joint changes a
 steady record so much that a bump at one joint, identified with the CoRs,
 removed 80 % of the misfit and was confirmed (benchmarks/results/
-close_loop_rates, joint_clearance_a3_r03 and r04 of commit 59b3969). So before
+close_loop_rates_fb9d67b, joint_clearance_a3_r03 and r04). So before
 the first candidate that passes is confirmed, the next one in the order is
 examined too (close_loop._attempt); if it passes as well (adequate or not),
 the two extended models are compared by BIC. The models are not nested: each is scored on the same
 residual metric (sum r^2 / sigma^2), scaled by the larger of their
 correlated-residual factors (evidence.lr_test's Satterthwaite scale), with
 each model's added parameters charged ln N. A difference of DECISIVE or more
-picks one: confirmed if its model reaches the noise, else held provisional
-(of two models short of the noise the better one may still be a share of
-something else; close_loop confirms a provisional effect only once a later
-round's model reaches the noise). A smaller difference leaves the round
+picks one: confirmed if its model reaches the noise or leaves at most a
+quarter (LEAVES) of what the other leaves of the base's misfit above the
+noise, else held provisional (of two models short of the noise the better
+one may still be a share of something else; close_loop confirms a
+provisional effect only once a later round's model reaches the noise). A smaller difference leaves the round
 undecided: neither is confirmed.
 """
 from __future__ import annotations
@@ -26,6 +27,9 @@ from typing import Optional, Sequence
 from .loop_result import CandidateTest
 
 DECISIVE = 10.0   # BIC difference taken as decisive (Kass and Raftery's "very strong")
+LEAVES = 0.25     # a preferred model above the noise wins if it leaves at most this share of what the rival
+                  # leaves of the base's misfit above the noise (a cart 12 % heavier: the mass 2 %, a 58 um
+                  # play far more; a 1 um play's bump 15 % against the play's own 25 %: not a winner)
 
 
 @dataclass
@@ -37,8 +41,17 @@ class Rivalry:
 
     @property
     def winner(self) -> Optional[CandidateTest]:
-        """The preferred one if its model reaches the noise: it may be confirmed."""
-        return self.preferred if self.preferred is not None and at_noise(self.preferred) else None
+        """The preferred one if its model reaches the noise, or leaves at most
+        LEAVES of what the rival leaves of the base's misfit above it: it may
+        be confirmed."""
+        p = self.preferred
+        if p is None:
+            return None
+        if at_noise(p):
+            return p
+        left_p, left_r = _left(p), _left(self.loser)
+        ok = left_p is not None and left_r is not None and left_r > 0 and left_p <= LEAVES * left_r
+        return p if ok else None
 
     @property
     def loser(self) -> Optional[CandidateTest]:
@@ -55,9 +68,16 @@ class Rivalry:
         d = self.dbic if self.preferred is a else -self.dbic
         out = f"preferred to {lo.effect} ({lo.label}), which passes too: dBIC {d:+.1f} between them"
         if self.winner is None:
-            out += (" but its model stays above the noise: the better of two approximations, held provisional "
-                    "(each may be a share of something else)")
+            out += (" but its model stays above the noise and leaves more than a quarter of the misfit the other "
+                    "leaves: the better of two approximations, held provisional (each may be a share of "
+                    "something else)")
         return out
+
+
+def _left(t: CandidateTest) -> Optional[float]:
+    """The share of the base's misfit above the noise the extension leaves."""
+    share = getattr(t, "misfit_share", None)
+    return None if share is None else 1.0 - float(share)
 
 
 def _added(t: CandidateTest, n_base: int) -> int:
@@ -85,4 +105,4 @@ def passing(tests: Sequence[CandidateTest]) -> list:
     return [t for t in tests if t.supported and t.adequate]
 
 
-__all__ = ["DECISIVE", "Rivalry", "at_noise", "compare", "passing"]
+__all__ = ["DECISIVE", "LEAVES", "Rivalry", "at_noise", "compare", "passing"]
