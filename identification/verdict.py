@@ -56,7 +56,7 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         rival = rnd.rivalry if rnd.rivalry and rnd.rivalry["preferred"] == sup.effect else None
         if rival:
             confirmed += "; " + rival["text"]
-        if sup.adequate and (rival is None or rival["at_noise"]):
+        if sup.adequate and (rival is None or rival["confirmable"]):
             rnd.confirmed, rnd.outcome, rnd.verdict = True, "confirmed", confirmed
             return
         # it passes every test but the model with it stays above the noise: a wrong effect taking a
@@ -144,7 +144,7 @@ def _rivals(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.n
     rv = compare(ok[0], min(others, key=lambda t: t.S), len(base.free))
     rnd.rivalry = {"first": rv.first.effect, "second": rv.second.effect, "dbic_first": rv.dbic,
                    "preferred": None if rv.preferred is None else rv.preferred.effect,
-                   "at_noise": rv.winner is not None, "text": rv.text()}
+                   "confirmable": rv.winner is not None, "text": rv.text()}
     if rv.preferred is not None:
         rv.loser.supported = False
         rv.loser.why_not.append(f"{rv.preferred.effect} ({rv.preferred.label}) explains the record better: dBIC "

@@ -169,7 +169,7 @@ def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transduc
     assert "joint_clearance" in [t.effect for t in rnd.tests], [t.effect for t in rnd.tests]
     if res.found == []:   # the play lost to, or tied with, something whose model stays above the noise
         assert rnd.rivalry and "joint_clearance" in (rnd.rivalry["first"], rnd.rivalry["second"]), rnd.verdict
-        assert not rnd.rivalry["at_noise"] and "dBIC" in rnd.verdict
+        assert not rnd.rivalry["confirmable"] and "dBIC" in rnd.verdict
 
 
 # an out-of-round wheel and zero errors on two channels (seed 32 passed too when written, before issue 18)
