@@ -22,8 +22,9 @@ goes on. A second round starts from the extended model.
 
 The pieces: identification.base_polish (the base at its own optimum),
 identification.candidates (rescore and the tests of each candidate),
-identification.verdict, identification.locate (where the residual sits),
-identification.loop_result (what is handed back).
+identification.verdict, identification.settle (a provisional effect at the
+end: confirmed only if still needed in the final model), identification.locate
+(where the residual sits), identification.loop_result (what is handed back).
 
 From the command line: `lss close-loop` (lss_app.cmd_close_loop). Every
 identification keeps a journal in DIR, the attribution of each round is
@@ -55,6 +56,7 @@ from .loop_result import CloseLoopResult, Round
 from .noise import excess, noise_levels
 from .problem import IdentificationProblem, nrmsd, tared
 from .verdict import decide
+from .settle import settle_provisional, still_needed
 
 log = logging.getLogger(__name__)
 
@@ -129,29 +131,8 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
         # the next extension then identifies both together
         base = dataclasses.replace(rnd.problem_extended, x0=rnd.problem_extended.values(rnd.x_extended))
         x = np.asarray(rnd.x_extended, float)
-    settle_provisional(result_rounds)
+    settle_provisional(result_rounds, still_needed)
     return CloseLoopResult(problem, np.asarray(x_base, float), result_rounds, time.time() - t0, grown)
-
-
-def settle_provisional(rounds: Sequence[Round]) -> None:
-    """A provisional effect (it passed every test, but the model with it stayed
-    above the noise) is confirmed when the last round's model, which carries
-    it, reaches the noise (that round confirmed an effect at the noise, or
-    found nothing significant above it); otherwise it stays unconfirmed."""
-    if not rounds:
-        return
-    last = rounds[-1]
-    at_noise = (last.confirmed and not last.provisional) or last.outcome == "nothing significant"
-    for r in rounds:
-        if not r.provisional:
-            continue
-        if at_noise and r is not last:
-            r.confirmed, r.outcome = True, "confirmed"
-            r.verdict = (f"{r.verdict_if_confirmed}; with the effect of round {last.number} the model reaches "
-                         f"the noise" if last.confirmed else
-                         f"{r.verdict_if_confirmed}; at the next round's refitted base the residual is at the noise")
-        else:
-            r.verdict += "; no later round brought the model to the noise"
 
 
 def hypothesis_counts(att: Attribution) -> dict:
@@ -294,5 +275,5 @@ def base_from_result(path, problem: IdentificationProblem) -> np.ndarray:
     return x
 
 
-__all__ = ["close_loop", "one_round", "CloseLoopResult", "Round", "localise", "base_from_result",
+__all__ = ["close_loop", "one_round", "CloseLoopResult", "Round", "localise", "base_from_result", "settle_provisional",
            "BASE_REFINE_EVALS", "PROFILE_POINTS", "REFINE_EVALS", "RESCORE_EVALS", "TEST_MAX"]

@@ -232,3 +232,4 @@ def test_a_provisional_effect_needs_a_later_model_at_the_noise():
     rounds = [_round(1, "x", provisional=True), _round(2, "not in the catalogue", provisional=True)]
     settle_provisional(rounds)
     assert not any(r.confirmed for r in rounds)
+
