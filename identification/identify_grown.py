@@ -42,7 +42,7 @@ PROFILE_POINTS = 9   # the profile of the least-determined variable on the first
 
 
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
-                   progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 100,
+                   progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 400,
                    uncertainty: bool = False, presolve: int = 0, shrink: bool = False,
                    ladder: Sequence[float] = LADDER, first: float = FIRST):
     """The problem (an IdentificationProblem or a joint one) identified over
