@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.identify import _local  # noqa: E402
+from identification.identify import _local, point_of  # noqa: E402
 from identification.problem import from_measurement  # noqa: E402
 from identification.windowing import LADDER, troubles, truncated  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
@@ -40,7 +40,7 @@ def stored_start(journals: Path, n: int, window) -> np.ndarray | None:
     p = journals / name
     if not p.exists():
         return None
-    return np.frombuffer(bytes.fromhex(json.loads(p.read_text())["key"]["start"]), dtype=float).copy()
+    return point_of(json.loads(p.read_text())["key"]["start"])
 
 
 def replay(data: Path, journals: Path, n: int, refine_evals: int, window: float) -> dict:

@@ -41,6 +41,11 @@ def _key(x) -> str:
     return np.asarray(x, float).tobytes().hex()
 
 
+def point_of(key: str) -> np.ndarray:
+    """The point a _key was made from (the start of a stored refinement: JOURNAL.local.json)."""
+    return np.frombuffer(bytes.fromhex(key), dtype=float).copy()
+
+
 class Journal:
     """Evaluations on disk: x -> f, appended line by line."""
 
