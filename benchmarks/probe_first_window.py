@@ -44,17 +44,20 @@ from lss_fmu.rig import load_truth, true_design_values  # noqa: E402
 SHIFTS = (-0.03, -0.01, -0.005, 0.0, 0.005, 0.01, 0.03)   # m, s_M moved from the truth
 
 
+def weighted_S(q, x, w) -> float:
+    """S in the declared noise's metric (sum of squared tared residuals over sigma^2); inf where x does
+    not simulate."""
+    try:
+        return float(np.sum(tared(q.samples - q.simulate(x), q.tare) ** 2 * w))
+    except Exception:
+        return np.inf
+
+
 def scan(q, k: int, w, evals: int, seed: int, step: float = 0.003, minima: int = 6) -> np.ndarray:
     """The point on q (the first window) found from half of it: the complex
     there, variable k scanned over its bounds, Levenberg-Marquardt from the
     lowest local minima, then on q."""
     qh = truncated(q, q.times[0] + 0.5 * (q.times[-1] - q.times[0]))
-
-    def Sh(x) -> float:
-        try:
-            return float(np.sum(tared(qh.samples - qh.simulate(x), qh.tare) ** 2 * w))
-        except Exception:
-            return np.inf
     x = np.asarray(identify(qh, max_evals=evals, seed=seed, progress=False).x, float)
     lo, hi = qh.bounds_array[k]
     grid = np.arange(lo, hi + 1e-12, step)
@@ -62,10 +65,10 @@ def scan(q, k: int, w, evals: int, seed: int, step: float = 0.003, minima: int =
     for s in grid:
         y = x.copy()
         y[k] = s
-        vals.append(Sh(y))
+        vals.append(weighted_S(qh, y, w))
     low = [i for i in range(len(grid)) if (i == 0 or vals[i] <= vals[i - 1])
            and (i == len(grid) - 1 or vals[i] <= vals[i + 1])]
-    best, fbest = x, Sh(x)
+    best, fbest = x, weighted_S(qh, x, w)
     for i in sorted(low, key=lambda i: vals[i])[:minima]:
         y = x.copy()
         y[k] = grid[i]
@@ -90,8 +93,8 @@ def main(argv=None) -> int:
     q = truncated(p, p.times[0] + args.first)
     w = 1.0 / np.asarray(p.noise, float) ** 2
 
-    def S(x) -> float:
-        return float(np.sum(tared(q.samples - q.simulate(x), q.tare) ** 2 * w)) / q.samples.size
+    def S(x) -> float:   # per sample: about 1 at the noise
+        return weighted_S(q, x, w) / q.samples.size
 
     truth = true_design_values(load_truth(m))
     xt = np.array([truth[k] for k in q.free])
