@@ -63,6 +63,28 @@ def beyond(dep: Departure, r_ext: np.ndarray, w: np.ndarray, J: Sequence[np.ndar
                    J=J)
 
 
+def candidate_beyond(dep: Departure, S_b: float, r_ext: np.ndarray, G: Sequence[np.ndarray], w: np.ndarray,
+                     q: int, m: int, m_effect: int, J: Sequence[np.ndarray] = ()) -> Optional[LRTest]:
+    """The other way round from `beyond`: what a catalogue candidate explains
+    once the departure has taken its share. The base with the departure
+    (S_b - its dS) against the candidate's extension with the departure fitted
+    to its residual r_ext (tared), the candidate's signature columns G off the
+    base's J and the departure's; q, m, m_effect the candidate's. A departure
+    that beats a candidate by BIC alone may be the better approximation of an
+    effect the base cannot follow (a quarter heavier cart, at CoRs that
+    compensated: crosstalk took a tenth of what the mass took and still scored
+    higher on its smaller scale); if the candidate stays significant beyond
+    it, the record holds more than the departure. None without its columns."""
+    if not dep.columns or not G:
+        return None
+    J = list(J)
+    cols = project_out(dep.columns, J + list(G), w)
+    _, fit, _, S_both = fit_gain(r_ext, cols, w)
+    S_dep = max(S_both, S_b - dep.test.dS)
+    Gc = project_out(G, J + list(dep.columns), w)
+    return lr_test(S_dep, S_both, Gc, r_ext - fit, w, q, m, m_effect, J=J + list(dep.columns))
+
+
 def _periodogram_peak(x: np.ndarray, fs: float, excluded: Sequence[tuple], f_min: float) -> tuple:
     """(frequency, amplitude) of the largest peak of x's Hann periodogram outside
     the excluded bands [(lo, hi), ...] and below 0.45 fs."""

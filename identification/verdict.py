@@ -4,6 +4,7 @@ with its evidence."""
 from __future__ import annotations
 
 import logging
+from typing import Optional
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from lss_fmu.variables import FORCE_CHANNELS
 
 from .candidates import sensor_columns
 from .catalogue import CATALOGUE
-from .departures import beyond
+from .departures import beyond, candidate_beyond
 from .locate import localise, where_text
 from .loop_result import CandidateTest, Round
 from .problem import IdentificationProblem, weighted_residual
@@ -39,7 +40,9 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         rnd.effect, rnd.problem_extended, rnd.x_extended = ev.effect, ev.problem, ev.x
         rnd.f_extended, rnd.H_extended, rnd.identified = ev.f, ev.H, ev.identified
         rnd.amplitude, rnd.refined = ev.amplitude, ev.refined
-    if sup is not None and best_dep is not None and best_dep.test.dbic > sup.lr.dbic:
+    kept = None   # why a candidate that a departure beats by BIC is kept
+    if sup is not None and best_dep is not None and best_dep.test.dbic > sup.lr.dbic \
+            and (kept := _stays_beyond(rnd, sup, best_dep, r_b, w)) is None:
         sup.supported = False
         sup.why_not.append(f"a disturbance outside the catalogue explains the residual better "
                            f"({best_dep.label}: dBIC {best_dep.test.dbic:+.1f} > {sup.lr.dbic:+.1f})")
@@ -53,6 +56,8 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         eff = CATALOGUE[sup.effect]
         confirmed = (f"{eff.title} ({sup.effect}, {sup.label}) confirmed: {stats_text(sup)} ({noise}); "
                      f"f from {rnd.f_base:.4g} to {sup.f:.4g}")
+        if kept:
+            confirmed += "; " + kept
         rival = rnd.rivalry if rnd.rivalry and rnd.rivalry["preferred"] == sup.effect else None
         if rival:
             confirmed += "; " + rival["text"]
@@ -96,6 +101,30 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         rnd.outcome = "nothing significant"
         ratio = "" if rnd.excess is None else f" (mean square / noise at most {float(np.max(rnd.excess.ratio)):.2f})"
         rnd.verdict = f"nothing significant: the residual is at the noise level{ratio}; {best}"
+
+
+def _stays_beyond(rnd: Round, sup: CandidateTest, dep, r_b: np.ndarray, w: np.ndarray) -> Optional[str]:
+    """Whether the candidate still explains a significant part once the
+    departure that beats it by BIC has taken its share (departures.
+    candidate_beyond: Bonferroni p < ALPHA and dBIC > 0); then the BIC
+    ranking alone does not veto it, and _still_outside decides whether the
+    departure is there too. Its statistic in the departure's detail, and a
+    line for the verdict if it stays (else None)."""
+    J = list(rnd.attribution.base_columns if rnd.attribution is not None else ())
+    try:
+        r_e, _ = weighted_residual(sup.problem, sup.problem.simulate(sup.x), w)
+        t = candidate_beyond(dep, float(np.sum(r_b ** 2 * w)), r_e, sup.signature or [], w, sup.lr.q, sup.lr.m,
+                             sup.lr.m_effect, J)
+    except Exception as exc:
+        log.warning("%s beyond %s unavailable: %s", sup.effect, dep.label, exc)
+        return None
+    dep.detail["candidate_beyond"] = None if t is None else {"effect": sup.effect, "T": float(t.T),
+                                                             "p_bonferroni": float(t.p_adj), "dbic": float(t.dbic)}
+    if t is None or not (t.significant and t.dbic > 0):
+        return None
+    return (f"{dep.family} ({dep.label}) scores a higher dBIC ({dep.test.dbic:+.1f}) but {sup.effect} stays "
+            f"significant beyond it (Bonferroni p = {t.p_adj:.2g}, dBIC {t.dbic:+.1f}) and nothing outside the "
+            f"catalogue remains beyond {sup.effect}")
 
 
 def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:

@@ -164,6 +164,43 @@ def test_a_departure_beyond_the_candidate():
     assert not clock.counts
 
 
+def test_a_candidate_beyond_the_departure():
+    """departures.candidate_beyond, the other way round: an effect in every
+    channel that a crosstalk column imitates on one channel stays significant
+    once the crosstalk has taken its share; a candidate that only imitates a
+    real crosstalk does not."""
+    rng = np.random.default_rng(7)
+    src = 300.0 * np.sin(2 * np.pi * 3.0 * T) + 40.0 * rng.standard_normal(N)
+    dep_col = _col(4, src - src.mean())
+    eff = np.column_stack([np.sin(2 * np.pi * 3.0 * T + 0.3 * j) for j in range(K)]) * SIG * 3.0
+    noise = rng.standard_normal((N, K)) * SIG
+
+    def dep_on(r):
+        _, _, S0, S1 = E.fit_gain(r, [dep_col], W)
+        lr = E.lr_test(S0, S1, [dep_col], r, W, 1, 42, 42)   # taken as counting, whatever its own test
+        return D.Departure("crosstalk", "1 into 4", dataclasses.replace(lr, p_adj=0.0, dbic=50.0), {}, [dep_col])
+
+    def cand_on(r):   # the candidate's extension: its column fitted, the residual and S
+        _, fit, S0, S1 = E.fit_gain(r, [eff], W)
+        return r - fit, S0
+
+    # the effect is there: its extension leaves the noise
+    r_b = noise + eff
+    dep = dep_on(r_b)
+    assert dep.test.dS > 20.0   # the crosstalk alone explains a part
+    r_e, S_b = cand_on(r_b)
+    t = D.candidate_beyond(dep, S_b, r_e, [eff], W, 1, 20, 1)
+    assert t.significant and t.dbic > 0, t
+    # the crosstalk is there: the candidate's column takes a share of it, nothing beyond
+    r_b = noise + 0.05 * dep_col
+    dep = dep_on(r_b)
+    r_e, S_b = cand_on(r_b)
+    assert S_b - float(np.sum(r_e ** 2 * W)) > 20.0   # the candidate alone would explain a part
+    t = D.candidate_beyond(dep, S_b, r_e, [eff], W, 1, 20, 1)
+    assert not (t.significant and t.dbic > 0), t
+    assert D.candidate_beyond(D.Departure("pulse", "-", dep.test, {}, None), S_b, r_e, [eff], W, 1, 20, 1) is None
+
+
 class _Model:
     """A stand-in problem: the measured samples and a model run (simulate) of them."""
 
