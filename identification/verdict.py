@@ -41,14 +41,15 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         rnd.f_extended, rnd.H_extended, rnd.identified = ev.f, ev.H, ev.identified
         rnd.amplitude, rnd.refined = ev.amplitude, ev.refined
     kept = None   # why a candidate that a departure beats by BIC is kept
+    r_e = _extended_residual(sup, w) if sup is not None and deps else None   # once, for both tests below
     if sup is not None and best_dep is not None and best_dep.test.dbic > sup.lr.dbic \
-            and (kept := _stays_beyond(rnd, sup, best_dep, r_b, w)) is None:
+            and (kept := _stays_beyond(rnd, sup, best_dep, r_b, w, r_e)) is None:
         sup.supported = False
         sup.why_not.append(f"a disturbance outside the catalogue explains the residual better "
                            f"({best_dep.label}: dBIC {best_dep.test.dbic:+.1f} > {sup.lr.dbic:+.1f})")
         sup = None
     if sup is not None:
-        _still_outside(rnd, sup, w)
+        _still_outside(rnd, sup, w, r_e)
         if not sup.supported:
             sup = None
     noise = f"noise {rnd.noise.source}" if rnd.noise else "noise"
@@ -103,7 +104,17 @@ def decide(rnd: Round, base: IdentificationProblem, r_b: np.ndarray, s, w: np.nd
         rnd.verdict = f"nothing significant: the residual is at the noise level{ratio}; {best}"
 
 
-def _stays_beyond(rnd: Round, sup: CandidateTest, dep, r_b: np.ndarray, w: np.ndarray) -> Optional[str]:
+def _extended_residual(sup: CandidateTest, w: np.ndarray) -> Optional[np.ndarray]:
+    """The candidate's extended residual at its estimate (None if it cannot be simulated)."""
+    try:
+        return weighted_residual(sup.problem, sup.problem.simulate(sup.x), w)[0]
+    except Exception as exc:
+        log.warning("%s: extended residual unavailable for the departures: %s", sup.effect, exc)
+        return None
+
+
+def _stays_beyond(rnd: Round, sup: CandidateTest, dep, r_b: np.ndarray, w: np.ndarray,
+                  r_e: Optional[np.ndarray]) -> Optional[str]:
     """Whether the candidate still explains a significant part once the
     departure that beats it by BIC has taken its share (departures.
     candidate_beyond: Bonferroni p < ALPHA and dBIC > 0); then the BIC
@@ -111,8 +122,9 @@ def _stays_beyond(rnd: Round, sup: CandidateTest, dep, r_b: np.ndarray, w: np.nd
     departure is there too. Its statistic in the departure's detail, and a
     line for the verdict if it stays (else None)."""
     J = list(rnd.attribution.base_columns if rnd.attribution is not None else ())
+    if r_e is None:
+        return None
     try:
-        r_e, _ = weighted_residual(sup.problem, sup.problem.simulate(sup.x), w)
         t = candidate_beyond(dep, float(np.sum(r_b ** 2 * w)), r_e, sup.signature or [], w, sup.lr.q, sup.lr.m,
                              sup.lr.m_effect, J)
     except Exception as exc:
@@ -127,7 +139,7 @@ def _stays_beyond(rnd: Round, sup: CandidateTest, dep, r_b: np.ndarray, w: np.nd
             f"catalogue remains beyond {sup.effect}")
 
 
-def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
+def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray, r_e: Optional[np.ndarray]) -> None:
     """Each significant disturbance outside the catalogue tested again on the
     supported candidate's extended residual, beyond the base's columns, every
     probe of the candidate's hypothesis and every channel's gain and offset
@@ -136,12 +148,7 @@ def _still_outside(rnd: Round, sup: CandidateTest, w: np.ndarray) -> None:
     the candidate only took a share of something the catalogue does not
     contain, and is not confirmed."""
     deps = [d for d in rnd.departures if d.counts]
-    if not deps:
-        return
-    try:
-        r_e, _ = weighted_residual(sup.problem, sup.problem.simulate(sup.x), w)
-    except Exception as exc:
-        log.warning("%s: extended residual unavailable for the departures: %s", sup.effect, exc)
+    if not deps or r_e is None:   # r_e: _extended_residual (None: it could not be simulated)
         return
     # beyond the base and all the effect can do (every probe of its hypothesis: a sensor extension
     # that freed too few channels leaves a gain error that crosstalk from a correlated channel mimics)
