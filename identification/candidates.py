@@ -21,6 +21,7 @@ from .extension import extended_problem, extension_of
 from .growing import FIRST, grow
 from .holdout import holdout
 from .identify import identify
+from .ladder import walk_ladder
 from .loop_result import MISFIT_SHARE, CandidateTest
 from .noise import ALPHA, excess
 from .problem import IdentificationProblem, nrmsd, tared, weighted_residual
@@ -189,14 +190,20 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
         # the estimates: the extended identification from there (it may walk the base far: a missing
         # mass drags the CoRs onto their bounds), then the refinement
         tag = "" if sc.effect == (att.ranking[0].effect if att.ranking else None) else f"_{sc.effect}"
-        st = dataclasses.replace(stage2, x0=stage2.values(x_held_full))
-        res = identify(st, max_evals=budget(max_evals, st, sc.effect), seed=seed + 1, progress=progress,
-                       workers=workers, journal=out / f"round{number}{tag}_journal.jsonl" if out else None)
-        xg = np.asarray(res.x, float)
-        if refine_evals > 0:
-            ref = refine(stage2, xg, max_evals=refine_evals, channel_weights=w, rel_step=STEP)
-            refined["global"] = {"S_start": ref.f_start, "S": ref.f, "nfev": ref.nfev, "iterations": ref.iterations}
-            xg = np.asarray(ref.x, float)
+
+        def fit_global(prob, x_start, name):
+            st = dataclasses.replace(prob, x0=prob.values(x_start))
+            res = identify(st, max_evals=budget(max_evals, st, sc.effect), seed=seed + 1, progress=progress,
+                           workers=workers, journal=out / f"round{number}{tag}{name}_journal.jsonl" if out else None)
+            xg = np.asarray(res.x, float)
+            if refine_evals > 0:
+                ref = refine(prob, xg, max_evals=refine_evals, channel_weights=w, rel_step=STEP)
+                refined["global" + name] = {"S_start": ref.f_start, "S": ref.f, "nfev": ref.nfev,
+                                            "iterations": ref.iterations}
+                xg = np.asarray(ref.x, float)
+            return xg
+
+        xg = fit_global(stage2, x_held_full, "")
         try:
             sim_g = stage2.simulate(xg)
             r_g, S_g = weighted_residual(stage2, sim_g, w)
@@ -204,6 +211,13 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
                 x_e, S_e, sim_e = xg, S_g, sim_g
         except Exception as exc:
             log.warning("%s: the global extension's point cannot be simulated: %s", sc.effect, exc)
+        if adequacy(stage2, sim_e, S_b, S_e, w)[0].any:
+            # above the noise with an effect on a ladder stopped on its rung's edge: the rung was
+            # chosen at the base's CoRs, which had absorbed part of the effect (identification.ladder)
+            stage2, x_e, S_e, sim_e, walked = walk_ladder(
+                sc.effect, stage2, x_e, S_e, sim_e, w, lambda prob, x, i: fit_global(prob, x, f"_ladder{i}"))
+            if walked:
+                refined["ladder"] = walked
         if regrow_evals > 0 and adequacy(stage2, sim_e, S_b, S_e, w)[0].any:
             # the extended model above the noise: its CoRs may sit in another valley of the whole
             # record, as the base's did before it was grown (identification.growing). It gets the
@@ -245,7 +259,11 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     # does the model with it reach the noise? (a wrong effect takes a share of a missing one's misfit
     # past every test above, but leaves the rest: close_loop holds such a candidate provisional)
     exc_e, share, _ = adequacy(stage2, sim_e, S_b, S_e, w) if not why else (None, None, False)
-    return CandidateTest(sc.effect, sc.label, stage2, x_e, float(np.sum(H_e ** 2)), H_e, S_e, lr, ho, identified,
+    label = sc.label
+    if any(s.get("S", np.inf) < s.get("S_start", -np.inf) for s in refined.get("ladder", [])):
+        eff = CATALOGUE[sc.effect]
+        label += f", walked along its ladder to {eff.LADDER.split('.')[-1]} {identified[eff.LADDER]:.3g} {eff.unit}"
+    return CandidateTest(sc.effect, label, stage2, x_e, float(np.sum(H_e ** 2)), H_e, S_e, lr, ho, identified,
                          amp, refined, supported=not why, why_not=why, base_alt=base_alt, signature=every,
                          excess=exc_e, misfit_share=share)
 

@@ -190,9 +190,14 @@ class JointClearance(Effect):
                            [Probe("gap", {"effects.joint_clearance.gap": g}, g)])
                 for g in self.GAPS]
 
+    GAP_MAX = 5e-3         # the FMU's range
+    LADDER = "effects.joint_clearance.gap"   # walked by identification.ladder
+
+    def rung(self, g: float) -> tuple:
+        return g / self.RATIO, min(self.GAP_MAX, g * self.RATIO)
+
     def extension(self, hyp, coef):
-        g = float(hyp.probes[0].params["effects.joint_clearance.gap"])
-        lo, hi = g / self.RATIO, min(5e-3, g * self.RATIO)
+        lo, hi = self.rung(float(hyp.probes[0].params["effects.joint_clearance.gap"]))
         return Extension({"effects.joint_clearance.gap": (lo, hi)},
                          {"effects.joint_clearance.gap": float(np.clip(coef[0], lo, hi))}, {})
 
