@@ -22,7 +22,6 @@ from .growing import FIRST, grow
 from .holdout import holdout
 from .identify import identify
 from .ladder import walk_ladder
-from .variants import best_variant
 from .loop_result import MISFIT_SHARE, CandidateTest
 from .noise import ALPHA, excess
 from .problem import IdentificationProblem, nrmsd, tared, weighted_residual
@@ -186,7 +185,6 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     if not ho.gain > 0:
         why.append(f"no held-out gain ({100 * ho.gain:+.1f}% against the refitted base)")
     x_e, S_e, sim_e = x_held_full, S_h, sim_h
-    variant = sc
     base_alt = None
     if not why:
         # the estimates: the extended identification from there (it may walk the base far: a missing
@@ -220,12 +218,6 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
                 sc.effect, stage2, x_e, S_e, sim_e, w, lambda prob, x, i: fit_global(prob, x, f"_ladder{i}"))
             if walked:
                 refined["ladder"] = walked
-        if adequacy(stage2, sim_e, S_b, S_e, w)[0].any:
-            # still above the noise: another alternative of the effect (the wheel's order) may fit
-            variant, ext, stage2, x_e, S_e, sim_e, tried = best_variant(
-                sc, att, base, ext, stage2, x_e, S_e, sim_e, w, lambda prob, x, i: fit_global(prob, x, f"_variant{i}"))
-            if tried:
-                refined["variants"] = tried
         if regrow_evals > 0 and adequacy(stage2, sim_e, S_b, S_e, w)[0].any:
             # the extended model above the noise: its CoRs may sit in another valley of the whole
             # record, as the base's did before it was grown (identification.growing). It gets the
@@ -267,7 +259,7 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     # does the model with it reach the noise? (a wrong effect takes a share of a missing one's misfit
     # past every test above, but leaves the rest: close_loop holds such a candidate provisional)
     exc_e, share, _ = adequacy(stage2, sim_e, S_b, S_e, w) if not why else (None, None, False)
-    label = sc.label if variant is sc else f"{variant.label} (fitted better than {sc.label}, ranked first)"
+    label = sc.label
     if any(s.get("S", np.inf) < s.get("S_start", -np.inf) for s in refined.get("ladder", [])):
         eff = CATALOGUE[sc.effect]
         label += f", walked along its ladder to {eff.LADDER.split('.')[-1]} {identified[eff.LADDER]:.3g} {eff.unit}"

@@ -103,7 +103,6 @@ class WheelOutOfRound(Effect):
     name, title, unit = "wheel_oor", "wheel out-of-roundness (transducer cart's driving wheels)", "m"
     PROBE = 1e-4           # m, divided by the order: small, the wheel contact is stiff and nonlinear
     ORDERS = (1, 2, 3)     # eccentric, oval, three-lobed
-    VARIANTS = True        # the orders are alternatives: identification.variants fits the others too
     PAIRS = ((0.0, 0.0), (0.5 * math.pi, 0.5 * math.pi), (0.0, 0.5 * math.pi), (math.pi, 0.5 * math.pi))
 
     def hypotheses(self, ctx):
