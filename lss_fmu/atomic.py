@@ -10,11 +10,17 @@ target is left as it was.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Union
+from typing import Any, Iterator, Union
+
+try:
+    import fcntl
+except ImportError:   # Windows: no advisory locks; concurrent writers there are on their own
+    fcntl = None
 
 PathLike = Union[str, os.PathLike]
 
@@ -71,3 +77,20 @@ def write_json_atomic(path: PathLike, obj: Any, indent: int = 2, **dumps_kwargs:
     unserialisable object leaves the old file in place."""
     text = json.dumps(obj, indent=indent, **dumps_kwargs) + "\n"
     return write_atomic(path, text)
+
+
+@contextlib.contextmanager
+def locked(path: PathLike) -> Iterator[None]:
+    """Hold an exclusive advisory lock on `path`.lock for a read-modify-write
+    of `path` shared between processes (two campaigns writing one set's
+    index: each must see the other's entries)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path.with_name(path.name + ".lock"), "a") as fh:
+        if fcntl is not None:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            if fcntl is not None:
+                fcntl.flock(fh.fileno(), fcntl.LOCK_UN)

@@ -52,6 +52,7 @@ import numpy as np
 from . import design
 from . import measurement as M
 from . import rig_effects as E
+from .atomic import locked, write_json_atomic
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
 from .layouts import NOMINAL_PRETENSION, TABLE2, load_track
 from .protocol import NAMES as PROTOCOLS
@@ -814,28 +815,27 @@ def _report(bar, r, log):
 
 def _write_set_json(out: Path, set_name, seed, sha, fmu_copy, results) -> None:
     f = out / "set.json"
-    data = {}
-    if f.is_file():
-        try:
-            data = json.loads(f.read_text())
-        except Exception:
-            data = {}
-    if data.get("set") not in (None, set_name) or data.get("seed") not in (None, seed):
+    with locked(f):   # two runs adding measurements to one set each keep the other's entries
         data = {}
-    entries = data.get("measurements", {})
-    for r in results:
-        if "error" in r or "skipped" in r:
-            continue
-        entries[folder_name(r["number"])] = {k: r[k] for k in ("number", "layout", "n_samples", "full_lap",
-                                                               "wall_s", "cpu_s", "simulated_time_s",
-                                                               "cart_seconds_per_cpu_second")}
-    data.update({"set": set_name, "seed": seed, "fmu": str(fmu_copy.relative_to(out)), "fmu_sha256": sha,
-                 "description": ("22 measurements of the paper's campaign from the virtual transducer cart "
-                                 "(docs/measurements.md); truth in answers/, never read by identification"),
-                 "measurements": dict(sorted(entries.items()))})
-    tmp = f.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    tmp.replace(f)
+        if f.is_file():
+            try:
+                data = json.loads(f.read_text())
+            except Exception:
+                data = {}
+        if data.get("set") not in (None, set_name) or data.get("seed") not in (None, seed):
+            data = {}
+        entries = data.get("measurements", {})
+        for r in results:
+            if "error" in r or "skipped" in r:
+                continue
+            entries[folder_name(r["number"])] = {k: r[k] for k in ("number", "layout", "n_samples", "full_lap",
+                                                                   "wall_s", "cpu_s", "simulated_time_s",
+                                                                   "cart_seconds_per_cpu_second")}
+        data.update({"set": set_name, "seed": seed, "fmu": str(fmu_copy.relative_to(out)), "fmu_sha256": sha,
+                     "description": ("22 measurements of the paper's campaign from the virtual transducer cart "
+                                     "(docs/measurements.md); truth in answers/, never read by identification"),
+                     "measurements": dict(sorted(entries.items()))})
+        write_json_atomic(f, data)
 
 
 # ---------------------------------------------------------------------------------------

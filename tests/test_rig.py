@@ -179,3 +179,25 @@ def test_field_start_stop_resumes(tmp_path):
     res = rig.generate_set("field", out, [21], workers=1, protocol="start-stop", progress=False,
                            log=lambda *_: None, fmu=next((out / "fmu").glob("*.fmu")))
     assert "error" not in res[0], res[0]
+
+
+def _add_to_set(args):
+    out, number = args
+    fmu = out / "fmu" / "lss.fmu"
+    result = {"number": number, "layout": "layout1", "n_samples": 10, "full_lap": False, "wall_s": 0.0,
+              "cpu_s": 0.0, "simulated_time_s": 0.0, "cart_seconds_per_cpu_second": 0.0}
+    for _ in range(100):
+        rig._write_set_json(out, "recovery", 1, "sha", fmu, [result])
+
+
+def test_set_index_written_by_two_processes_keeps_both(tmp_path):
+    """Two runs adding measurements to one set's folder at once (bench_recovery
+    on two measurements): set.json is a read-modify-write; neither may fail on
+    the other's temporary file nor drop its entries."""
+    from concurrent.futures import ProcessPoolExecutor
+    (tmp_path / "fmu").mkdir()
+    with ProcessPoolExecutor(2) as pool:
+        list(pool.map(_add_to_set, [(tmp_path, 8), (tmp_path, 18)]))
+    entries = json.loads((tmp_path / "set.json").read_text())["measurements"]
+    assert sorted(entries) == [rig.folder_name(8), rig.folder_name(18)]
+    assert not list(tmp_path.glob("*.tmp"))
