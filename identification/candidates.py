@@ -21,7 +21,7 @@ from .extension import extended_problem, extension_of
 from .growing import FIRST, grow
 from .holdout import holdout
 from .identify import identify
-from .ladder import walk_ladder
+from .ladder import ladder_name, recentred, walk_ladder, widened
 from .loop_result import MISFIT_SHARE, CandidateTest
 from .noise import ALPHA, excess
 from .problem import IdentificationProblem, nrmsd, tared, weighted_residual
@@ -151,16 +151,28 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     kw = dict(q=len(ext.free), m=2 * m, m_effect=m_effect, J=att.base_columns)
     lr_lin = lr_test(S_b, S_b - (S0 - S1), G, r_b - fit_lin, w, **kw)
     lr_held = lr_test(S_b, S_h, G, r_h, w, **kw)
-    if not (lr_held.significant and lr_held.dbic > 0) and lr_lin.significant and lr_lin.dbic > 0 and refine_evals > 0:
+    # an effect on a ladder cannot be switched off within its rung (a play of 5 um is no play of 0):
+    # its held fit above the base says the rung is wrong at these CoRs, not that the effect is absent
+    ladder = ladder_name(sc.effect, stage2)
+    rung_wrong = ladder is not None and S_h > S_b and regrow_evals > 0
+    if not (lr_held.significant and lr_held.dbic > 0) and (lr_lin.significant and lr_lin.dbic > 0 or rung_wrong) \
+            and refine_evals > 0:
         # the signature is in the residual, but at the base parameters that compensated for the
         # effect the FMU cannot show it (a quarter heavier cart: at the base's CoRs its fitted mass
         # raised S threefold, and Levenberg-Marquardt on both from there stopped above the base):
-        # the extended model identified as the base was (`regrow`; else refined locally)
+        # the extended model identified as the base was (`regrow`; else refined locally). A ladder's
+        # variable is searched over its rung and the two beside it, free on the first window too
+        # (identification.ladder.widened), and the rung then centred on what it found.
         try:
             if regrow_evals > 0:
-                xj, S_j, sim_j, info = regrow(stage2, x_held_full, base.free, w, evals=regrow_evals, seed=seed + 3,
+                joint = widened(sc.effect, stage2)
+                xj, S_j, sim_j, info = regrow(joint, x_held_full, joint.free if ladder else base.free, w,
+                                              evals=regrow_evals, seed=seed + 3,
                                               journal=out / f"round{number}_joint_{sc.effect}.jsonl" if out else None)
                 refined["joint"] = {"S_start": S_h, "S": S_j, "nfev": info["nfev"], "windows": info["windows"]}
+                if ladder and np.isfinite(S_j) and S_j < S_h:
+                    stage2 = recentred(sc.effect, stage2, xj)
+                    refined["joint"]["rung"] = list(stage2.bounds[ladder])
             else:
                 rj = refine(stage2, x_held_full, max_evals=refine_evals, central=True, channel_weights=w,
                             rel_step=STEP)
@@ -260,6 +272,8 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     # past every test above, but leaves the rest: close_loop holds such a candidate provisional)
     exc_e, share, _ = adequacy(stage2, sim_e, S_b, S_e, w) if not why else (None, None, False)
     label = sc.label
+    if "rung" in refined.get("joint", {}):
+        label += f", fitted with the CoRs across the rungs beside it to {identified[ladder]:.3g} {CATALOGUE[sc.effect].unit}"
     if any(s.get("S", np.inf) < s.get("S_start", -np.inf) for s in refined.get("ladder", [])):
         eff = CATALOGUE[sc.effect]
         label += f", walked along its ladder to {eff.LADDER.split('.')[-1]} {identified[eff.LADDER]:.3g} {eff.unit}"

@@ -69,3 +69,42 @@ def walk_ladder(effect: str, problem, x, S: float, sim, w, fit: Callable, *, ste
         log.info("%s ladder: %s %.3g -> %.3g, S %.1f -> %.1f", effect, name, g, xm[k], S, S_m)
         problem, x, S, sim = moved, xm, float(S_m), sim_m
     return problem, x, S, sim, walked
+
+
+WIDEN = 2       # the joint fit's range: this many rung ratios beyond the rung's bounds on each side
+
+
+def ladder_name(effect: str, problem) -> "str | None":
+    """The effect's ladder variable if it is free in `problem`, else None."""
+    name = getattr(CATALOGUE[effect], "LADDER", None)
+    return name if name is not None and name in problem.free else None
+
+
+def widened(effect: str, problem):
+    """`problem` with its ladder variable's rung widened by a whole rung on
+    each side (the rungs beside it joined to it). For the joint fit of the
+    base and the effect over growing windows: the rung was picked at the
+    base's CoRs, and on joint_clearance_a4_r03 (4 um drawn) the pick was the
+    7.7 um rung, whose lower edge (5.1 um) fits 400 times worse than 4 um
+    at the true CoRs; on the first 0.3 s window the gap's landscape is
+    smooth enough to be searched across three rungs (2.3 to 26 um: 4.00 um,
+    the noise reached)."""
+    name = ladder_name(effect, problem)
+    if name is None:
+        return problem
+    eff = CATALOGUE[effect]
+    lo, hi = problem.bounds[name]
+    f = eff.RATIO ** WIDEN
+    return dataclasses.replace(problem, bounds={**problem.bounds, name: (lo / f, min(eff.GAP_MAX, hi * f))})
+
+
+def recentred(effect: str, problem, x):
+    """`problem` with its ladder variable on the rung centred on its value in
+    `x` (after a fit over several rungs: what follows stays in one valley)."""
+    name = ladder_name(effect, problem)
+    if name is None:
+        return problem
+    g = float(np.asarray(x, float)[list(problem.free).index(name)])
+    lo, hi = CATALOGUE[effect].rung(g)
+    return dataclasses.replace(problem, bounds={**problem.bounds, name: (min(lo, g), max(hi, g))},
+                               x0={**problem.values(x)})

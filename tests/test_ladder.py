@@ -71,3 +71,28 @@ def test_an_effect_without_a_ladder_is_left_alone():
     p, x = Problem(), np.zeros(2)
     out = walk_ladder("mass", p, x, 1.0, None, np.ones(7), fit=None)
     assert out[0] is p and out[1] is x and out[2] == 1.0 and out[4] == []
+
+
+def test_the_joint_fit_searches_the_rungs_beside_the_ranked_one(fmu_file):
+    """4 um drawn, the ranking's rung 7.7 um (5.1 to 11.5 um), as on
+    joint_clearance_a4_r03 of the rates benchmark: there the held fit at the
+    rung's lower edge stayed 3 times above the base and the joint fit within
+    the rung never left that edge. Widened by a rung on each side and free on
+    the first window, the joint fit of CoRs and gap finds the drawn gap; the
+    rung is then centred on it."""
+    from identification.candidates import regrow
+    from identification.ladder import recentred, widened
+    ext, x, S, sim, w = _on_rung(4e-6, 7.69e-6, 0.0)
+    lo, hi = ext.bounds[GAP]
+    assert np.isclose(x[-1], lo) and lo > 4e-6            # clipped to the rung's lower edge, above the truth
+    x[:-1] = 0.55                                          # the CoRs from the middle of their range
+    joint = widened("joint_clearance", ext)
+    jlo, jhi = joint.bounds[GAP]
+    assert np.isclose(jlo, lo / 1.5 ** 2) and np.isclose(jhi, hi * 1.5 ** 2)
+    xj, S_j, _, info = regrow(joint, x, joint.free, w, evals=60, seed=3)
+    assert abs(xj[-1] / 4e-6 - 1.0) < 0.05, (xj, info["windows"])
+    assert S_j / ext.samples.size < 2.0, info["windows"]     # about 1 at the noise
+    centred = recentred("joint_clearance", ext, xj)
+    clo, chi = centred.bounds[GAP]
+    assert clo < xj[-1] < chi and np.isclose(np.sqrt(clo * chi), xj[-1])
+    assert recentred("track_bump", ext, xj) is ext and widened("track_bump", ext) is ext   # no ladder: untouched
