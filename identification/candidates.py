@@ -151,11 +151,13 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     kw = dict(q=len(ext.free), m=2 * m, m_effect=m_effect, J=att.base_columns)
     lr_lin = lr_test(S_b, S_b - (S0 - S1), G, r_b - fit_lin, w, **kw)
     lr_held = lr_test(S_b, S_h, G, r_h, w, **kw)
-    # an effect on a ladder cannot be switched off within its rung (a play of 5 um is no play of 0):
-    # its held fit above the base says the rung is wrong at these CoRs, not that the effect is absent
+    # an effect on a ladder cannot be switched off within its rung (a play of 5 um is no play of 0),
+    # and its rung is the ranking's pick at CoRs that absorbed part of it: a held fit that fails
+    # (above the base, or below it but not significantly) may say the rung is wrong, not that the
+    # effect is absent
     ladder = ladder_name(sc.effect, stage2)
-    rung_wrong = ladder is not None and S_h > S_b and regrow_evals > 0
-    if not (lr_held.significant and lr_held.dbic > 0) and (lr_lin.significant and lr_lin.dbic > 0 or rung_wrong) \
+    rung_unsure = ladder is not None and regrow_evals > 0
+    if not (lr_held.significant and lr_held.dbic > 0) and (lr_lin.significant and lr_lin.dbic > 0 or rung_unsure) \
             and refine_evals > 0:
         # the signature is in the residual, but at the base parameters that compensated for the
         # effect the FMU cannot show it (a quarter heavier cart: at the base's CoRs its fitted mass
