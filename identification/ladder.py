@@ -85,8 +85,8 @@ def widened(effect: str, problem):
     each side (the rungs beside it joined to it). For the joint fit of the
     base and the effect over growing windows: the rung was picked at the
     base's CoRs, and on joint_clearance_a4_r03 (4 um drawn) the pick was the
-    7.7 um rung, whose lower edge (5.1 um) fits 400 times worse than 4 um
-    at the true CoRs; on the first 0.3 s window the gap's landscape is
+    7.7 um rung, whose lower edge fits far worse than 4 um at the true CoRs
+    (430 per sample at 5 um against 0.33); on the first 0.3 s window the gap's landscape is
     smooth enough to be searched across three rungs (2.3 to 26 um: 4.00 um,
     the noise reached)."""
     name = ladder_name(effect, problem)

@@ -76,7 +76,7 @@ def test_an_effect_without_a_ladder_is_left_alone():
 def test_the_joint_fit_searches_the_rungs_beside_the_ranked_one(fmu_file):
     """4 um drawn, the ranking's rung 7.7 um (5.1 to 11.5 um), as on
     joint_clearance_a4_r03 of the rates benchmark: there the held fit at the
-    rung's lower edge stayed 3 times above the base and the joint fit within
+    rung's lower edge stayed 4 times above the base and the joint fit within
     the rung never left that edge. Widened by a rung on each side and free on
     the first window, the joint fit of CoRs and gap finds the drawn gap; the
     rung is then centred on it."""
