@@ -140,8 +140,10 @@ def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
             p = parts[0] if len(parts) == 1 else JointProblem(parts)
             c0 = time.process_time()
             try:
+                more = {"start": args.start} if args.grown and args.start != "complex" else {}
                 res = run(p, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
                           progress=False, restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
+                          **more,
                           presolve=0 if args.cors_only else args.presolve,
                           journal=out / "journals" / f"m{n:02d}.jsonl")
                 r = res.to_dict()
@@ -199,6 +201,9 @@ def main(argv=None) -> int:
     ap.add_argument("--grown", action="store_true",
                     help="identification.identify_grown: the complex on the first 0.3 s (--max-evals), then "
                          "Levenberg-Marquardt over growing windows (--refine-evals after it)")
+    ap.add_argument("--start", default="complex", choices=("complex", "single"),
+                    help="with --grown and --repeats > 1: where the joint fit starts (identification.joint_start: "
+                         "'single', the first record alone, then the others' trigger points)")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
@@ -237,6 +242,8 @@ def main(argv=None) -> int:
                 label += f", {args.repeats} records"
             folder = "cors_only" if args.cors_only else "ten_free"
             folder += "" if args.repeats == 1 else f"_k{args.repeats}"
+            if args.grown and args.repeats > 1 and args.start != "complex":
+                folder, label = folder + f"_{args.start}", label + f", started from {args.start}"
             if args.shrink and args.cors_only:
                 folder, label = folder + "_shrink", label + ", shorter windows"
             results = joint_records(data, runs / folder, numbers, args, tare)

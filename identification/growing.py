@@ -70,7 +70,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
          first: float = FIRST, growth: float = GROWTH, profile_points: int = 9, seed: int = 0,
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
-         reset_unseen: bool = False) -> tuple:
+         reset_unseen: bool = False, start: Optional[Sequence[float]] = None) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -90,7 +90,10 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     wherever its last point happened to put it (a start-stop's first 0.3 s,
     the drive saturated: v_ref, K_P and K_I move nothing, and K_P was left
     1240 above the truth, which the stop at 1 s could not undo). `info`
-    lists them (`unseen`).
+    lists them (`unseen`). `start`: a point to take the first window up from
+    instead of the complex (Levenberg-Marquardt there; nothing is reset: the
+    point is not the complex's random leftover, nor is it profiled again):
+    identification.joint_start.
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -99,22 +102,32 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     hold = [n for n in hold if n in problem.free]
     q1 = dataclasses.replace(q, free=tuple(n for n in problem.free if n not in hold),
                              fixed={**q.fixed, **{n: problem.x0[n] for n in hold}}) if hold else q
-    res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal)
-    x1 = np.asarray(res.x, float)
-    nfev = int(getattr(res, "nfev", evals))
+    if start is None:
+        res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal)
+        x1 = np.asarray(res.x, float)
+        nfev = int(getattr(res, "nfev", evals))
+    else:
+        lo, hi = np.array(q1.bounds_array, float).T
+        x1, nfev = np.clip(np.asarray(start, float), lo, hi), 0
     if channel_weights is not None:
         w = np.asarray(channel_weights, float)
         S = float(np.sum(tared(q1.samples - q1.simulate(x1), q1.tare) ** 2 * w))
     else:
         w, S = _weights(q1, x1, noise_std)
-    if profile_points > 1:
+    if profile_points > 1 and start is None:
         try:
             xp, S, pinfo = profile_polish(q1, x1, w, points=profile_points)
             x1, nfev = np.asarray(xp, float), nfev + int(pinfo.get("nfev", 0))
         except Exception as exc:   # the complex's point stands
             log.warning("grow: profile on the first window failed: %s", exc)
+    per_window = STEP_ITERATIONS * (2 * len(problem.free) + 2) + 1
+    if start is not None:
+        r1 = refine(q1, x1, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
+        nfev += r1.nfev
+        if np.isfinite(r1.f) and r1.f < S:
+            x1, S = np.asarray(r1.x, float), float(r1.f)
     unseen = []
-    if reset_unseen:
+    if reset_unseen and start is None:
         x1, unseen = _reset_unseen(q1, x1, w, S)
         nfev += 2 * len(q1.free)
     vals = {**{n: problem.x0[n] for n in hold}, **dict(zip(q1.free, map(float, x1)))}
@@ -122,7 +135,6 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
     if keep_points:
         trail[0]["x"] = x.tolist()
-    per_window = STEP_ITERATIONS * (2 * len(x) + 2) + 1
     for t in steps[1:]:
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
         r = refine(q, x, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)

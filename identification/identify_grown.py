@@ -33,18 +33,21 @@ from typing import Optional, Sequence
 import numpy as np
 
 from .growing import FIRST, grow
+from .joint import JointProblem
+from .joint_start import single_start
 from .problem import LINEARISABLE
 from .windowing import LADDER, troubles, truncated
 
 log = logging.getLogger(__name__)
 
+STARTS = ("complex", "single")   # where a joint problem's first window starts (identification.joint_start)
 PROFILE_POINTS = 9   # the profile of the least-determined variable on the first window (growing.grow)
 
 
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
                    progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 400,
                    uncertainty: bool = False, presolve: int = 0, shrink: bool = False,
-                   ladder: Sequence[float] = LADDER, first: float = FIRST):
+                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "complex"):
     """The problem (an IdentificationProblem or a joint one) identified over
     a growing window: `max_evals` complex evaluations on the first `first`
     seconds, the profile there, Levenberg-Marquardt over growing windows in
@@ -53,7 +56,10 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     intervals on the whole record. `shrink`: shorter windows of `ladder`
     while `windowing.troubles` reports any (needs `uncertainty`). Returns an
     identify.IdentificationResult (`grown`: each window's S per sample;
-    `windows`: the windows tried when shrinking). `workers`, `restarts` and
+    `windows`: the windows tried when shrinking). `start`: "complex" (the
+    complex over every variable on the first window) or, for a joint problem,
+    "single" (its first record alone, then the others' trigger points:
+    identification.joint_start). `workers`, `restarts` and
     `presolve` are accepted for the common signature and not used: the
     first window's complex is short."""
     from .identify import IdentificationResult, _local, _safe_H
@@ -67,6 +73,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     if shrink and not uncertainty:
         raise ValueError("grown identification with shrink needs uncertainty=True: the roughness of the CoRs "
                          "decides the window")
+    if start not in STARTS:
+        raise ValueError(f"grown identification: start {start!r} is not one of {', '.join(STARTS)}")
     del workers, restarts, presolve
     t0 = time.time()
     x0 = problem.x0_vector()
@@ -75,8 +83,15 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     f0 = float(problem(x0))
     noise = getattr(problem, "noise", None)
     w = None if noise is None else 1.0 / np.asarray(noise, float) ** 2
+    x_start, started = None, None
+    if start == "single" and isinstance(problem, JointProblem) and w is not None:
+        x_start, started = single_start(problem, w, evals=int(max_evals), first=first, seed=seed, journal=journal,
+                                        profile_points=PROFILE_POINTS)
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
-                   channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True)
+                   channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
+                   start=x_start)
+    if started is not None:
+        info["nfev"] += started["nfev"]
     f = float(problem(x))
     local = _local(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
@@ -86,6 +101,11 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     message = (f"grown over {len(trail)} windows to {trail[-1]['window_s']:.3g} s "
                f"(S per sample {trail[0]['S_per_sample']:.3g} on the first, {trail[-1]['S_per_sample']:.3g} "
                f"on the last)")
+    if started is not None:
+        taken = next(t for t in started["single"] if t["window_s"] == started["from_window_s"])
+        message += (f"; started from the first record alone (its point at {taken['window_s']:.3g} s, S per sample "
+                    f"{taken['S_per_sample']:.3g}) and the others' trigger points at "
+                    + ", ".join(f"{t['trigger']:.4g}" for t in started["triggers"]) + " m")
     if info.get("unseen"):
         message += f"; unseen on the first window, started from their start values: {', '.join(info['unseen'])}"
     if local.get("refined"):

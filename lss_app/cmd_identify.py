@@ -47,6 +47,10 @@ def register(sub, common) -> None:
                          "then Levenberg-Marquardt over windows growing to the whole record; with --shrink a "
                          "shorter window is taken up from the grown point at its length "
                          "(identification.identify_grown; pointwise or likelihood objective)")
+    ap.add_argument("--start", default="complex", choices=("complex", "single"),
+                    help="with --grown and --with: where the joint fit starts; complex: over every variable on "
+                         "the records' first window (default); single: the first record alone, then each "
+                         "further record's trigger point (identification.joint_start)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
     ap.add_argument("--shrink", action="store_true",
@@ -75,6 +79,8 @@ def run(args) -> int:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
     if args.refine_evals < 0:
         raise ValueError(f"--refine-evals {args.refine_evals}: must be 0 or more")
+    if args.start != "complex" and not (args.grown and args.with_records):
+        raise ValueError(f"--start {args.start}: where a joint fit starts, needs --grown and --with")
     model = parse_model(args.model)
     meas = load_measurement(args.measurement)
     problem = from_measurement(meas, model, free=parse_free(args.free), window=args.window, tare=args.tare,
@@ -91,10 +97,11 @@ def run(args) -> int:
                         filename=str(out / "identify.log"))
     if args.staged and args.grown:
         raise ValueError("--staged and --grown: choose one pipeline")
+    more = {"start": args.start} if args.start != "complex" else {}
     res = identify_or_staged(problem, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
                              journal=out / "journal.jsonl", progress=not args.no_progress, workers=args.workers,
                              restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
-                             presolve=args.presolve)
+                             presolve=args.presolve, **more)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{meas.id}, model {model}"
     x0, x = (res.x0, res.x) if problem is first else (problem.part_x(0, res.x0), problem.part_x(0, res.x))

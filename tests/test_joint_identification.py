@@ -106,3 +106,14 @@ def test_lss_identify_takes_further_records(records, tmp_path):
     assert res["free"] == ["contact.e_JA", "contact.e_SW", TRIGGER, f"{TRIGGER}@1"]
     assert "s_M@1" in res["values"] and res["measurement"].endswith("(+1 records)")
     assert (out / "forces.png").is_file()
+
+
+def test_lss_identify_refuses_a_joint_start_without_a_joint_fit(records, tmp_path):
+    import subprocess
+    import sys
+    cp = subprocess.run([sys.executable, "-m", "lss_app.cli", "identify", str(records[0].path), "--model", "LW",
+                         "--out", str(tmp_path / "one"), "--grown", "--start", "single", "--no-progress"],
+                        capture_output=True, text=True, timeout=300)
+    assert cp.returncode != 0
+    assert "--start single: where a joint fit starts, needs --grown and --with" in cp.stderr
+    assert not (tmp_path / "one").exists()
