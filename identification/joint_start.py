@@ -27,7 +27,7 @@ import numpy as np
 from lss_fmu.design import TRIGGER
 from lss_fmu.variables import FORCE_CHANNELS
 
-from .problem import tared
+from .problem import weighted_residual
 from .uncertainty import at_noise
 from .windowing import truncated
 
@@ -38,10 +38,10 @@ FINE = 11      # ... then over two coarse steps around the best
 
 
 def trigger_scan(part, values: dict, w: np.ndarray, first: float) -> tuple:
-    """(trigger point, S there, simulations): the trigger point of `part` (one
-    record) that fits its first `first` seconds best, the other design
-    variables at `values`, S in the metric `w` (1 / sigma^2 per channel). A
-    point that does not simulate counts as infinitely far."""
+    """(trigger point, S per sample there, simulations): the trigger point of
+    `part` (one record) that fits its first `first` seconds best, the other
+    design variables at `values`, S in the metric `w` (1 / sigma^2 per
+    channel). A point that does not simulate counts as infinitely far."""
     q = truncated(part, part.times[0] + first)
     lo, hi = q.bounds[TRIGGER]
     k = q.free.index(TRIGGER)
@@ -51,7 +51,7 @@ def trigger_scan(part, values: dict, w: np.ndarray, first: float) -> tuple:
         x = base.copy()
         x[k] = s
         try:
-            return float(np.sum(tared(q.samples - q.simulate(x), q.tare) ** 2 * w))
+            return weighted_residual(q, q.simulate(x), w)[1]
         except Exception:
             return np.inf
     grid = np.linspace(lo, hi, COARSE)
@@ -62,7 +62,7 @@ def trigger_scan(part, values: dict, w: np.ndarray, first: float) -> tuple:
     fvals = [S(s) for s in fine]
     j = int(np.argmin(fvals))
     s_best, S_best = (fine[j], fvals[j]) if fvals[j] <= vals[best] else (grid[best], vals[best])
-    return float(s_best), float(S_best), COARSE + FINE
+    return float(s_best), float(S_best) / q.samples.size, COARSE + FINE
 
 
 def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
@@ -88,8 +88,7 @@ def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
     for k, part in enumerate(problem.parts[1:], start=1):
         s, S, used = trigger_scan(part, values, w[k * n:(k + 1) * n], first)
         values[own(k)] = s
-        triggers.append({"record": k, "trigger": s, "S_per_sample": S / (n * np.sum(
-            part.times <= part.times[0] + first + 1e-9))})
+        triggers.append({"record": k, "trigger": s, "S_per_sample": S})
         nfev += used
         log.info("joint start: record %d's trigger point at %.4g m (S per sample %.3g on its first window)",
                  k, s, triggers[-1]["S_per_sample"])

@@ -9,7 +9,7 @@ import pytest
 from identification import growing
 from identification.joint import JointProblem, own
 from identification.joint_start import single_start, trigger_scan
-from identification.problem import from_measurement, tared
+from identification.problem import from_measurement, weighted_residual
 from identification.windowing import truncated
 from lss_fmu.design import TRIGGER
 from lss_fmu.rig import load_truth, true_design_values
@@ -47,7 +47,7 @@ def test_the_trigger_scan_finds_a_records_trigger_point(two_records):
     assert abs(s - truth[1][TRIGGER]) < 0.01, (s, truth[1][TRIGGER])
     x_true = np.array([truth[1][n] for n in part.free])
     q = truncated(part, part.times[0] + 0.3)
-    S_true = float(np.sum(tared(q.samples - q.simulate(x_true), q.tare) ** 2 * w))
+    S_true = weighted_residual(q, q.simulate(x_true), w)[1] / q.samples.size
     assert S <= S_true * 1.02   # at least as good as the truth's trigger point, to the fine grid's step
 
 
