@@ -47,6 +47,8 @@ class Hypothesis:
     label: str
     probes: list
     fixed: dict = field(default_factory=dict)   # FMU values this hypothesis assumes (position, period)
+    origin: str = "scan"    # "line": built from a line of the residual (identification.ripple_line) ...
+    spread: float = 0.0     # ... then the relative half-width of the doubt on its fixed value
 
 
 @dataclass
@@ -64,6 +66,8 @@ class Context:
     sensor_gain_tol: float = 0.03
     # the white noise of each force channel, N (declared or estimated: identification.evidence)
     sensor_noise: np.ndarray = field(default_factory=_noise_std)
+    # the residual's strongest lines in the ripple's pitch band (identification.ripple_line)
+    ripple_lines: list = field(default_factory=list)
 
 
 @dataclass
@@ -211,11 +215,23 @@ class MotorRipple(Effect):
     length plus the plate's, COHERENT): the pitches are scanned uniformly in
     spatial frequency 1/p, a quarter cycle over that length apart (76 of
     them from 50 to 230 mm). A coarser scan misses a ripple whose pitch falls
-    between two hypotheses: 7 pitches found a 62 mm ripple at 6 % of f."""
+    between two hypotheses: 7 pitches found a 62 mm ripple at 6 % of f.
+
+    Where the residual holds a line in the band (Context.ripple_lines) the
+    hypotheses are built around it instead: LINE_STEPS pitches over the line's
+    doubt (a resolution cell), probed at LINE_PROBE. On a chaotic record a
+    100 N probe's signature is the trajectory's divergence, not the ripple's
+    line (motor_ripple_a5_r04: the scan ranked 117 mm first, the drawn pitch
+    73 mm; at 5 N the signature peaks at the line). Such a hypothesis is then
+    fitted with the base over growing windows even when its fit with the base
+    held fails (candidates.examine_candidate), its phase free over the whole
+    circle."""
     name, title, unit = "motor_ripple", "linear-motor thrust ripple", "N"
     PROBE = 100.0
     P_MIN, P_MAX = 0.05, 0.23     # m, pole pitches of the linear motors of a sorter catalogue
     COHERENT = 1.2                # m, motor plus plate length
+    LINE_PROBE = 5.0              # N
+    LINE_STEPS = (-0.5, -0.25, 0.0, 0.25, 0.5)   # of the line's resolution cell, relative to its order
 
     @classmethod
     def pitches(cls) -> np.ndarray:
@@ -223,21 +239,41 @@ class MotorRipple(Effect):
         return 1.0 / k
 
     def hypotheses(self, ctx):
-        out = []
-        for p in map(float, self.pitches()):
-            probes = [Probe(lab, {"effects.motor_ripple.amplitude": self.PROBE, "effects.motor_ripple.pitch": p,
-                                  "effects.motor_ripple.phase": phi}, self.PROBE)
-                      for lab, phi in (("cos", 0.0), ("sin", 0.5 * math.pi))]
-            out.append(Hypothesis(self.name, f"pitch {p * 1000:.0f} mm", probes, {"effects.motor_ripple.pitch": p}))
-        return out
+        if ctx.ripple_lines:
+            step = self.LINE_STEPS[1] - self.LINE_STEPS[0]
+            return [self._hypothesis(ln.pitch / (1.0 + d * ln.relative_cell), self.LINE_PROBE, "line",
+                                     f"the residual's line at {ln.order:.2f} cycles/m, {ln.ratio:.0f} x its median",
+                                     step * ln.relative_cell)
+                    for ln in ctx.ripple_lines for d in self.LINE_STEPS]
+        return [self._hypothesis(float(p), self.PROBE) for p in self.pitches()]
+
+    def _hypothesis(self, p: float, probe: float, origin: str = "scan", why: str = "",
+                    spread: float = 0.0) -> Hypothesis:
+        probes = [Probe(lab, {"effects.motor_ripple.amplitude": probe, "effects.motor_ripple.pitch": p,
+                              "effects.motor_ripple.phase": phi}, probe)
+                  for lab, phi in (("cos", 0.0), ("sin", 0.5 * math.pi))]
+        label = f"pitch {p * 1000:.1f} mm ({why})" if why else f"pitch {p * 1000:.0f} mm"
+        return Hypothesis(self.name, label, probes, {"effects.motor_ripple.pitch": p}, origin, spread)
+
+    def hypothesis_count(self, scanned: int) -> int:
+        """The Bonferroni m of the effect: the lines were found by a search over
+        the whole band, so they count as the scan of it would."""
+        return max(scanned, len(self.pitches()))
 
     def extension(self, hyp, coef):
         amp = float(np.clip(math.hypot(coef[0], coef[1]), 1.0, 900.0))
         phi = math.atan2(coef[1], coef[0])
         p = hyp.fixed["effects.motor_ripple.pitch"]
+        if hyp.origin == "line":
+            # the pitch over the gap to the neighbouring hypotheses; the phase anywhere (the linear
+            # response at the base's point need not be the record's)
+            rel = hyp.spread
+            pitch_bounds, phase_bounds = (p / (1 + rel), p * (1 + rel)), (phi - math.pi, phi + math.pi)
+        else:
+            pitch_bounds, phase_bounds = (0.97 * p, 1.03 * p), _phase_bounds(phi)
         return Extension({"effects.motor_ripple.amplitude": (0.0, max(1000.0, 2 * amp)),
-                          "effects.motor_ripple.phase": _phase_bounds(phi),
-                          "effects.motor_ripple.pitch": (0.97 * p, 1.03 * p)},
+                          "effects.motor_ripple.phase": phase_bounds,
+                          "effects.motor_ripple.pitch": pitch_bounds},
                          {"effects.motor_ripple.amplitude": amp, "effects.motor_ripple.phase": phi,
                           "effects.motor_ripple.pitch": p}, {})
 

@@ -55,6 +55,7 @@ from .locate import analyse, catalogue_bands, context, localise, signals_at
 from .loop_result import CloseLoopResult, Round
 from .noise import excess, noise_levels
 from .problem import IdentificationProblem, nrmsd, tared
+from .ripple_line import ripple_lines
 from .verdict import decide
 from .settle import settle_provisional, still_needed
 
@@ -138,12 +139,17 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
 def hypothesis_counts(att: Attribution) -> dict:
     """Per effect, the hypotheses the round scanned (failed ones included): the
     Bonferroni correction's m. The sensor effect counts its channels (the
-    extension chooses among them)."""
+    extension chooses among them), the ripple its whole pitch scan (its
+    hypotheses may be built around the residual's lines instead)."""
     out: dict = {}
     for h in att.all_hypotheses:
         out[h.effect] = out.get(h.effect, 0) + 1
     for fl in att.failed:
         out[fl["effect"]] = out.get(fl["effect"], 0) + 1
+    for name, n in out.items():   # a search the attribution did not run counts as if it had
+        count = getattr(CATALOGUE[name], "hypothesis_count", None)
+        if count is not None:
+            out[name] = count(n)
     if "sensor" in out:
         out["sensor"] = max(out["sensor"], len(FORCE_CHANNELS))
     return out
@@ -206,6 +212,9 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
     sig = signals_at(base, x)
     ra, s = analyse(base, x, sim, sig)
     ctx = context(base, x, sensor_offset_std, noise.sigma, s)
+    if s is not None and "motor_ripple" in effects:
+        ripple = CATALOGUE["motor_ripple"]
+        ctx.ripple_lines = ripple_lines(r_b, s, (ripple.P_MIN, ripple.P_MAX))
     cache = out / f"round{number}_attribution.json" if out else None
     att = attribute(base, x, ctx, effects=effects, progress=progress)
     if cache:
