@@ -19,9 +19,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
 import numpy as np
 
-LINE_RATIO = 5.0       # the peak against the band's median amplitude: below it no line is claimed
+LINE_RATIO = 5.0       # the peak against the channel's median (band to Nyquist): below it no line is claimed
 MIN_CYCLES = 4.0       # cycles of the line in the record (fewer: it merges with the removed trend)
 PAD = 16               # zero padding (points of the transform per point of the record)
 MAX_LINES = 3          # the strongest line is not always the ripple's (a chaotic misfit's peak can lead)
@@ -31,7 +32,7 @@ MAX_LINES = 3          # the strongest line is not always the ripple's (a chaoti
 class RippleLine:
     pitch: float        # m
     order: float        # cycles per m of the transducer cart's travel
-    ratio: float        # peak / median amplitude over the band
+    ratio: float        # peak / the channel's median amplitude from the band's lower edge to Nyquist
     resolution: float   # cycles per m: 1 / the record's length of track
 
     @property
@@ -45,8 +46,9 @@ def ripple_lines(r: np.ndarray, s: np.ndarray, pitch_range: tuple) -> list:
     strongest first) of the residual `r` (samples x channels) in the order
     domain of the track position `s` (unwrapped, m), each channel's peak
     within the orders of `pitch_range` (m) against that channel's median
-    from the band's lower edge to Nyquist; empty if the record is too short, the cart does not move or
-    no peak stands LINE_RATIO above its median."""
+    from the band's lower edge to Nyquist; empty if the record is too
+    short, the cart does not move or no peak stands LINE_RATIO above its
+    median. White noise claims a line in about 1 record of 200."""
     s = np.asarray(s, float)
     r = np.asarray(r, float)
     if s.ndim != 1 or len(s) != len(r) or len(s) < 16 or not np.all(np.isfinite(s)):
