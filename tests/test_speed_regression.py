@@ -6,7 +6,11 @@ default parameters, 1.5 s from the start, 300 Hz, with the transducer on
 cart 0 (straight), cart 6 (ramp) and cart 20 (180 degree curve). The current
 FMU must reproduce the 7 force channels to a 7-channel NRMSD (largest per
 channel RMSD / range of the reference) of at most 1 % at the default
-tolerance, and much closer at a tight one.
+tolerance, and converge on it as the tolerance shrinks: the same physics
+integrated more closely. Measured on 2026-11-26 (DOP853, worst of the three
+carts): 0.20 % at 1e-6, 0.036 % at 1e-7, 0.011 % at 1e-8. The limits leave a
+factor 1.5 to 3 for another compiler's rounding; a changed force law or
+parameter would stay put as the tolerance shrinks (the 1e-8 case).
 
 Why only 1.5 s: the chain is chaotic (52 carts, steering wheels bouncing in
 their guide clearance). A change of 1e-9 m/s in the initial speed alone,
@@ -39,7 +43,7 @@ def reference():
     return pd.read_csv(Path(__file__).parent / "data" / REF)
 
 
-@pytest.mark.parametrize("tol, limit", [(1e-4, 0.01), (1e-6, 0.002)])
+@pytest.mark.parametrize("tol, limit", [(1e-4, 0.01), (1e-6, 0.004), (1e-8, 0.0005)])
 @pytest.mark.parametrize("transducer", TRANSDUCERS)
 def test_layout7_forces_match_pre_optimisation_reference(sim, reference, transducer, tol, limit):
     df = sim.simulate(1.5, 1.0 / 300.0, {"layout.name": "layout7", "chain.transducer": transducer},
