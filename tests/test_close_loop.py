@@ -160,7 +160,11 @@ def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transduc
     but stopped on the 0.3 um rung's edge (the base's CoRs had absorbed the
     play), so neither model reached the noise and nothing was confirmed. Now
     an extension on its rung's edge walks the ladder (identification.ladder):
-    the play reaches the noise and is confirmed. Never the bump."""
+    the play reaches the noise and is confirmed. Never the bump. (In the runs
+    of 2026-11-26 the play's fit across the rungs beside its own already
+    landed inside a rung, 0.99 um, and no walk was needed; whether the ladder
+    is walked depends on where that fit stops: the test asks for the
+    play's rung search, either way, and the bump examined and beaten.)"""
     params = {"effects.joint_clearance.gap": 1e-6}
     problem, _ = effect_case([], seed, params=params, transducer=transducer)
     res = _loop(problem, **QUICK)
@@ -169,7 +173,8 @@ def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transduc
     assert res.found == ["joint_clearance"], rnd.verdict
     gap = rnd.evidence.identified["effects.joint_clearance.gap"]
     assert 1e-6 / 1.5 < gap < 1.5e-6, gap
-    assert "walked along its ladder" in rnd.verdict and "track_bump" in [t.effect for t in rnd.tests]
+    assert "walked along its ladder" in rnd.verdict or "across the rungs beside it" in rnd.verdict, rnd.verdict
+    assert "track_bump" in [t.effect for t in rnd.tests] and "preferred to track_bump" in rnd.verdict
 
 
 # an out-of-round wheel and zero errors on two channels (seed 32 passed too when written, before issue 18)
