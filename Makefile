@@ -26,7 +26,7 @@ demo: fmu
 	$(VENV)/bin/lss demo --out demo_out
 
 test: fmu
-	$(VPY) -m pytest -q -p no:cacheprovider -n $(JOBS) tests
+	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) tests
 
 clean:
 	rm -rf build demo_out
