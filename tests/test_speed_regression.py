@@ -8,8 +8,8 @@ FMU must reproduce the 7 force channels to a 7-channel NRMSD (largest per
 channel RMSD / range of the reference) of at most 1 % at the default
 tolerance, and converge on it as the tolerance shrinks: the same physics
 integrated more closely. Measured on 2026-11-26 (DOP853, worst of the three
-carts): 0.20 % at 1e-6, 0.036 % at 1e-7, 0.011 % at 1e-8. The limits leave a
-factor 1.5 to 3 for another compiler's rounding; a changed force law or
+carts): 0.20 % at 1e-6, 0.036 % at 1e-7, 0.011 % at 1e-8. The limits leave
+factors 2 and 4.5 for another compiler's rounding; a changed force law or
 parameter would stay put as the tolerance shrinks (the 1e-8 case).
 
 Why only 1.5 s: the chain is chaotic (52 carts, steering wheels bouncing in
