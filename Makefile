@@ -4,7 +4,8 @@ PY ?= python3
 VENV := .venv
 VPY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-# test processes: one per core (the suite is CPU-bound; CI has 2 cores)
+# test processes: one per core (the suite is CPU-bound; CI has 2 cores); worksteal: the long
+# close-loop tests otherwise queue on one worker at the end while the other idles
 JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 
 .PHONY: all fmu demo test venv clean
@@ -26,7 +27,7 @@ demo: fmu
 	$(VENV)/bin/lss demo --out demo_out
 
 test: fmu
-	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) tests
+	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) --dist worksteal tests
 
 clean:
 	rm -rf build demo_out
