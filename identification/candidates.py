@@ -14,7 +14,7 @@ from typing import Optional
 import numpy as np
 
 from .attribution import Attribution, demean_columns
-from .base_polish import BASE_REFINE_EVALS, STEP
+from .base_polish import BASE_REFINE_EVALS, PROFILE_POINTS, STEP
 from .catalogue import CATALOGUE, SensorError
 from .evidence import fit_gain, lr_test, project_out
 from .extension import extended_problem, extension_of
@@ -112,7 +112,7 @@ def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0:
 
 def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, seed, out, number, progress,
                       workers, refine_evals, base_refine_evals=BASE_REFINE_EVALS,
-                      regrow_evals: int = 0) -> CandidateTest:
+                      regrow_evals: int = 0, profile_points: int = PROFILE_POINTS) -> CandidateTest:
     """The candidate through the tests. What the effect explains is measured
     where the base cannot move into another valley (the CoR landscape is rough
     and many-valleyed: a wider search with more parameters finds a lower valley
@@ -172,7 +172,7 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
             if regrow_evals > 0:
                 joint = widened(sc.effect, stage2)
                 xj, S_j, sim_j, info = regrow(joint, x_held_full, joint.free if ladder or line else base.free, w,
-                                              evals=regrow_evals, seed=seed + 3,
+                                              evals=regrow_evals, seed=seed + 3, profile_points=profile_points,
                                               journal=out / f"round{number}_joint_{sc.effect}.jsonl" if out else None)
                 refined["joint"] = {"S_start": S_h, "S": S_j, "nfev": info["nfev"], "windows": info["windows"]}
                 if ladder and np.isfinite(S_j) and S_j < S_h:
@@ -243,6 +243,7 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
             # truth gives 0.4, and a bump that passed too fitted better: identification.rivals)
             try:
                 xr, S_r, sim_r, info = regrow(stage2, x_e, base.free, w, evals=regrow_evals, seed=seed + 2,
+                                              profile_points=profile_points,
                                               journal=out / f"round{number}_regrow_{sc.effect}.jsonl" if out else None)
                 refined["regrown"] = {"S_start": S_e, "S": S_r, "nfev": info["nfev"], "windows": info["windows"]}
                 if S_r < S_e:
@@ -295,16 +296,19 @@ def adequacy(problem, sim, S_b, S, w) -> tuple:
     return exc, share, (not exc.any) or share >= MISFIT_SHARE
 
 
-def regrow(ext_problem, x_e, base_free, w, *, evals, seed, journal=None) -> tuple:
+def regrow(ext_problem, x_e, base_free, w, *, evals, seed, journal=None,
+           profile_points: int = PROFILE_POINTS) -> tuple:
     """(x, S, sim, info): the extended problem identified again as the base
-    was (identification.growing: the complex on the first window, the effect
-    held at its estimate there, then windows growing to the whole record),
-    in the metric w."""
+    was (identification.growing: the complex on the first window, the profile
+    over `profile_points` values as the loop's base had it, the effect held at
+    its estimate there, then windows growing to the whole record), in the
+    metric w."""
     st = dataclasses.replace(ext_problem, x0=ext_problem.values(x_e))
     hold = [n for n in ext_problem.free if n not in base_free]
     duration = float(st.times[-1] - st.times[0])
     n = int(round(evals * max(1.0, duration / FIRST)))
-    x, info = grow(st, evals=n, hold=hold, channel_weights=w, seed=seed, journal=journal)
+    x, info = grow(st, evals=n, hold=hold, channel_weights=w, seed=seed, journal=journal,
+                   profile_points=profile_points)
     sim = st.simulate(x)
     _, S = weighted_residual(st, sim, w)
     return np.asarray(x, float), float(S), sim, info

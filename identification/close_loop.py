@@ -88,7 +88,7 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
     `polish_evals`: the complex run again from the base point at the start of
     each round (default `max_evals`, what an extension gets; 0: none);
     `profile_points`: the profile of the base's least-determined variable
-    (profile_polish; 0: none). `first_window`: the base identification
+    (profile_polish; 0: none), on the base and on every regrown extension. `first_window`: the base identification
     starts on the record's first seconds and grows its window to the whole
     record (identification.growing; the complex's `base_evals` counted in
     simulations of the whole record); None or 0: the complex on the whole
@@ -241,7 +241,7 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
             t = examine_candidate(base, x, fit, att, S_b, w, m, counts.get(fit.score.effect, 1), max_evals=max_evals,
                                   seed=seed, out=out, number=number, progress=progress, workers=workers,
                                   refine_evals=refine_evals, base_refine_evals=base_refine_evals,
-                                  regrow_evals=regrow_evals)
+                                  regrow_evals=regrow_evals, profile_points=profile_points)
         except Exception as exc:   # a degenerate candidate: dropped, the loop goes on
             log.warning("round %d: candidate %s dropped: %s", number, fit.score.effect, exc)
             rnd.dropped.append({"effect": fit.score.effect, "stage": "extension", "reason": str(exc)[:300]})

@@ -46,7 +46,8 @@ def register(sub, common) -> None:
                     help="simulations of the base's refinement to its own optimum before any test (0: none)")
     ap.add_argument("--profile-points", type=int, default=PROFILE_POINTS,
                     help="values at which the base's least-determined variable is scanned, the others refitted, "
-                         "before any test (0: no profile)")
+                         "before any test, and in every extension identified again over growing windows "
+                         "(0: no profile)")
     ap.add_argument("--candidates", type=int, default=TEST_MAX,
                     help="candidate effects taken through the extended identification and the tests per round")
     ap.add_argument("--noise", choices=("declared", "estimate"), default="declared",
