@@ -53,3 +53,35 @@ def test_grown_base_reaches_the_noise_where_the_whole_window_did_not(fmu_file, s
     for k in ("contact.e_JA", "contact.e_SW", "contact.e_RW"):
         i = problem.free.index(k)
         assert abs(x[i] - truth[i]) < 0.01, (k, x[i], truth[i])
+
+
+def test_a_regrown_extension_gets_the_profile_the_loop_was_given(monkeypatch):
+    """candidates.regrow identifies the extension as the base was: with the
+    loop's profile_points (a loop told 0 profiles nothing, here too), the
+    effect's parameters held on the first window."""
+    import dataclasses
+
+    from identification import candidates
+
+    @dataclasses.dataclass
+    class Ext:
+        free: tuple = ("e_JA", "effects.mass.transducer_factor")
+        times: np.ndarray = dataclasses.field(default_factory=lambda: np.linspace(0.0, 0.6, 181))
+        x0: dict = dataclasses.field(default_factory=dict)
+
+        def values(self, x):
+            return dict(zip(self.free, x))
+
+    seen = []
+
+    def grow(st, **kw):
+        seen.append((st.x0, kw["profile_points"], kw["hold"], kw["evals"]))
+        raise StopIteration
+
+    monkeypatch.setattr(candidates, "grow", grow)
+    for points in (0, 5):
+        with pytest.raises(StopIteration):
+            candidates.regrow(Ext(), [0.6, 1.2], ("e_JA",), np.ones(7), evals=30, seed=0, profile_points=points)
+    assert [s[1] for s in seen] == [0, 5]
+    assert seen[0][0] == {"e_JA": 0.6, "effects.mass.transducer_factor": 1.2}
+    assert seen[0][2] == ["effects.mass.transducer_factor"] and seen[0][3] == 60   # 30 per 0.3 s of record
