@@ -88,8 +88,9 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
     `polish_evals`: the complex run again from the base point at the start of
     each round (default `max_evals`, what an extension gets; 0: none);
     `profile_points`: the profile of the base's least-determined variable
-    (profile_polish; 0: none), on the base and on every regrown extension. `first_window`: the base identification
-    starts on the record's first seconds and grows its window to the whole
+    (profile_polish; 0: none), on the base and on every regrown extension.
+    `first_window`: the base identification starts on the record's first
+    seconds and grows its window to the whole
     record (identification.growing; the complex's `base_evals` counted in
     simulations of the whole record); None or 0: the complex on the whole
     record. `regrow_evals`: an extension that passes the tests but stays
