@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 # close-loop tests otherwise queue on one worker at the end while the other idles
 JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 
-.PHONY: all fmu demo test venv clean
+.PHONY: all fmu demo test test-slow venv clean
 
 all: fmu
 
@@ -26,8 +26,13 @@ fmu: $(STAMP)
 demo: fmu
 	$(VENV)/bin/lss demo --out demo_out
 
+# make test leaves out the long cases marked slow (each repeats what a faster case checks on
+# another record, seed or optimisation level); make test-slow runs them (about 50 CPU-min)
 test: fmu
-	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) --dist worksteal tests
+	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) --dist worksteal -m "not slow" tests
+
+test-slow: fmu
+	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) --dist worksteal -m slow tests
 
 clean:
 	rm -rf build demo_out

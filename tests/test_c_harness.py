@@ -94,7 +94,7 @@ def assert_every_path_ran(stdout: str, best: int) -> None:
         assert (used[p] > 0) == (p <= best), (used, f"the -O2 FMU's widest path is {best}")
 
 
-@pytest.mark.parametrize("level", ["-O0", "-O1"])
+@pytest.mark.parametrize("level", [pytest.param("-O0", marks=pytest.mark.slow), "-O1"])
 def test_harness_under_asan_ubsan(workdir, best_vector_path, level):
     flags = [level, "-fno-omit-frame-pointer", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
     if not _sanitizer_works(flags, workdir):

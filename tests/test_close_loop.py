@@ -27,6 +27,8 @@ BASE_EVALS = 120
 EXT_EVALS = 200   # the extended design has 5 to 8 variables: 120 evaluations stop short
 QUICK = dict(base_evals=80, max_evals=100, refine_evals=40)   # where no amplitude is checked
 LEAN = dict(QUICK, profile_points=0)   # and where the disturbance, not the base's last digits, decides
+# cases that repeat what a faster case here already checks (make test skips them; make test-slow runs them)
+SLOW = pytest.mark.slow
 
 
 def _loop(problem, rounds=1, effects=None, **kw):
@@ -59,7 +61,8 @@ def _evidence_reported(rnd) -> None:
 # one seed per effect (each case costs about 40 CPU-s; the out-of-round wheel: the two-effects case and
 # the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were confirmed too when written
 # (docs/close_loop.md); the rates over many records: benchmarks/bench_close_loop_rates.py
-@pytest.mark.parametrize("effect, seed", [("sensor", 11), ("joint_clearance", 11), ("mass", 12)])
+@pytest.mark.parametrize("effect, seed", [pytest.param("sensor", 11, marks=SLOW),
+                                          pytest.param("joint_clearance", 11, marks=SLOW), ("mass", 12)])
 def test_undeclared_effect_is_found_and_fitted(fmu_file, effect, seed):
     problem, params = effect_case([effect], seed)
     res = _loop(problem)
@@ -79,7 +82,7 @@ def test_undeclared_effect_is_found_and_fitted(fmu_file, effect, seed):
     assert abs(got - want) <= 0.25 * abs(want), (effect, got, want, rnd.identified)
 
 
-@pytest.mark.parametrize("seed, transducer", [(22, None), (3, 20)])
+@pytest.mark.parametrize("seed, transducer", [pytest.param(22, None, marks=SLOW), (3, 20)])
 def test_clean_record_nothing_confirmed(fmu_file, seed, transducer):
     """No effect at all: the base refitted to its optimum leaves noise, and no
     candidate passes (the old share rule confirmed a track bump on seed 22).
@@ -110,7 +113,7 @@ def test_gain_only_sensor_error_is_a_sensor_fault(fmu_file):
 
 
 @pytest.mark.parametrize("effect, params, seed, transducer", [
-    ("mass", {"effects.mass.transducer_factor": 1.25}, 9, 13),
+    pytest.param("mass", {"effects.mass.transducer_factor": 1.25}, 9, 13, marks=SLOW),
     ("track_bump", {"effects.track_bump.height": 0.002, "effects.track_bump.s": 24.646018366025523,
                   "effects.track_bump.length": 0.15}, 5, None)])
 def test_the_issues_own_misses_are_confirmed(fmu_file, effect, params, seed, transducer):
@@ -132,6 +135,7 @@ def test_the_issues_own_misses_are_confirmed(fmu_file, effect, params, seed, tra
     assert abs(rnd.amplitude - want) <= 0.25 * abs(want), (rnd.amplitude, want, rnd.identified)
 
 
+@SLOW
 @pytest.mark.parametrize("seed, transducer", [(1458325094, 26)])   # the benchmark's mass_a3_r04
 def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
     """The transducer cart 1 % heavier: a motor ripple fitted in its place
@@ -150,6 +154,7 @@ def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
         assert not t.supported or t.effect == "mass" or not t.adequate, (t.effect, t.status)
 
 
+@SLOW
 @pytest.mark.parametrize("seed, transducer", [(435425658, 26)])   # the benchmark's joint_clearance_a3_r04
 def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transducer):
     """A 1 um play in every joint: a track bump at one joint, identified with
@@ -205,7 +210,7 @@ def test_artefact_outside_the_catalogue_is_reported_and_located(fmu_file):
 
 @pytest.mark.parametrize("name, family", [
     ("crosstalk", "crosstalk"),
-    ("clock_drift", "clock")])
+    pytest.param("clock_drift", "clock", marks=SLOW)])
 def test_disturbance_outside_the_catalogue_is_not_confirmed(fmu_file, name, family):
     """Crosstalk between channels, the logger's clock running fast (drawn by the
     rig, lss_fmu.rig_effects): "not in the catalogue", the disturbance named,

@@ -36,7 +36,8 @@ def test_close_loop_writes_report_and_result(measurement, tmp_path, capsys):
     assert "effects" not in (measurement / "meta.json").read_text()
 
 
-@pytest.mark.parametrize("protocol, number, lap", [("start-up", 1, 0.6), ("stop", 20, 1.3)])
+@pytest.mark.parametrize("protocol, number, lap", [("start-up", 1, 0.6),
+                                                      pytest.param("stop", 20, 1.3, marks=pytest.mark.slow)])
 def test_close_loop_follows_the_record_protocol(tmp_path_factory, fmu_file, capsys, protocol, number, lap):
     """A transient record (issue 18): the loop simulates what its metadata says
     (from rest, or the photocell then the stop), and reports the verdict with

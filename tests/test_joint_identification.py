@@ -68,6 +68,7 @@ def test_the_joint_problem_is_the_records_side_by_side(records):
     assert jp(bad) == 2 * parts[0].bad_value
 
 
+@pytest.mark.slow
 def test_two_records_identify_the_cors_closer_than_one(records):
     """The drive known, the CoRs free: each of e_JA, e_SW, e_RW within 3 of its
     standard deviations of the truth, and those standard deviations below

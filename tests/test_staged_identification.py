@@ -28,6 +28,7 @@ def start_stop_layout1(rig_record):
     return rig_record(1, "start-stop", WINDOW + 0.2)
 
 
+@pytest.mark.slow
 def test_ten_free_staged_reaches_the_noise_and_the_cors(start_stop_layout1):
     meas = start_stop_layout1
     truth = true_design_values(load_truth(meas))

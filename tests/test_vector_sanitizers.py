@@ -99,7 +99,7 @@ def reference(work):
     return ref, paths
 
 
-@pytest.mark.parametrize("level", sorted(LEVELS))
+@pytest.mark.parametrize("level", [pytest.param("-O0", marks=pytest.mark.slow), "-O1"])
 def test_sanitized_build_runs_every_path_like_O2(work, reference, level):
     ref, paths = reference
     exe = _compile(work, level, [*LEVELS[level], *ASAN])

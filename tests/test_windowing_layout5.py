@@ -25,6 +25,7 @@ def start_stop_layout5(rig_record):
     return rig_record(13, "start-stop", 1.7)
 
 
+@pytest.mark.slow
 def test_a_chaotic_window_is_cut_and_the_cors_found(start_stop_layout5):
     meas = start_stop_layout5
     truth = true_design_values(load_truth(meas))
