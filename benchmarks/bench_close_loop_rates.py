@@ -58,14 +58,14 @@ FAMILIES = {
                                                      "the specification)"),
     "sensor_offset": ("x tol", (1.1, 1.25, 1.5, 2.0, 3.0), "offset on one channel, in multiples of the zero "
                                                       "tolerance (3 sigma of the declared offset)"),
-    "mass": ("1", (0.001, 0.002, 0.005, 0.01, 0.03, 0.25), "transducer cart's mass factor - 1"),
+    "mass": ("1", (0.001, 0.002, 0.005, 0.01, 0.03, 0.25, 0.5), "transducer cart's mass factor - 1"),
     "track_bump": ("mm", (0.02, 0.05, 0.1, 0.25, 1.0, 2.0), "|height| of a bump at a random joint, passed by the "
                                                   "transducer cart at a random time of the record"),
     "joint_clearance": ("um", (0.1, 0.25, 0.5, 1.0, 4.0, 20.0), "gap in every joint"),
     "wheel_oor_1": ("um", (2.0, 5.0, 15.0, 40.0, 100.0, 300.0), "radial runout, 1 lobe (eccentric)"),
     "wheel_oor_2": ("um", (1.0, 2.5, 5.0, 10.0, 25.0, 80.0), "radial runout, 2 lobes"),
     "wheel_oor_3": ("um", (0.3, 1.0, 2.5, 5.0, 12.0, 40.0), "radial runout, 3 lobes"),
-    "motor_ripple": ("N", (1.0, 2.5, 5.0, 10.0, 30.0, 100.0), "thrust ripple amplitude, pitch 50-200 mm"),
+    "motor_ripple": ("N", (1.0, 2.5, 5.0, 10.0, 30.0, 100.0, 300.0), "thrust ripple amplitude, pitch 50-200 mm"),
 }
 OOC = ("interference", "clock_drift", "crosstalk", "channel_bump")
 

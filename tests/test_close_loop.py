@@ -58,9 +58,10 @@ def _evidence_reported(rnd) -> None:
     assert str(round(ev["statistic"], 1)) in rnd.verdict.replace(",", "") or "LR statistic" in rnd.verdict
 
 
-# one seed per effect (each case costs about 40 CPU-s; the out-of-round wheel: the two-effects case and
-# the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were confirmed too when written
-# (docs/close_loop.md); the rates over many records: benchmarks/bench_close_loop_rates.py
+# one seed per effect (190-260 CPU-s a case at 187 ns per cart and right-hand side; the out-of-round
+# wheel: the two-effects case and the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were
+# confirmed too when written (docs/close_loop.md); the rates over many records:
+# benchmarks/bench_close_loop_rates.py
 @pytest.mark.parametrize("effect, seed", [pytest.param("sensor", 11, marks=SLOW),
                                           pytest.param("joint_clearance", 11, marks=SLOW), ("mass", 12)])
 def test_undeclared_effect_is_found_and_fitted(fmu_file, effect, seed):
