@@ -58,7 +58,7 @@ def _evidence_reported(rnd) -> None:
     assert str(round(ev["statistic"], 1)) in rnd.verdict.replace(",", "") or "LR statistic" in rnd.verdict
 
 
-# one seed per effect (190-260 CPU-s a case at 187 ns per cart and right-hand side; the out-of-round
+# one seed per effect (180-265 CPU-s a case at 184-187 ns per cart and right-hand side; the out-of-round
 # wheel: the two-effects case and the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were
 # confirmed too when written (docs/close_loop.md); the rates over many records:
 # benchmarks/bench_close_loop_rates.py

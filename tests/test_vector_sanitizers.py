@@ -99,7 +99,8 @@ def reference(work):
     return ref, paths
 
 
-@pytest.mark.parametrize("level", [pytest.param("-O0", marks=pytest.mark.slow), "-O1"])
+@pytest.mark.parametrize("level", [pytest.param(lv, marks=pytest.mark.slow) if lv == "-O0" else lv
+                                   for lv in sorted(LEVELS)])
 def test_sanitized_build_runs_every_path_like_O2(work, reference, level):
     ref, paths = reference
     exe = _compile(work, level, [*LEVELS[level], *ASAN])
