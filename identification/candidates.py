@@ -160,8 +160,10 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     # likewise a hypothesis built on a line of the residual (a ripple's pitch): its phase and amplitude
     # at the base's CoRs say little on a record the model follows only for its first tenths of a second
     line = getattr(sc.hypothesis, "origin", "scan") == "line" and regrow_evals > 0
+    # and an effect the CoRs absorb (catalogue: ABSORBED) is searched with them, free from the start
+    absorbed = CATALOGUE[sc.effect].ABSORBED and regrow_evals > 0
     if not (lr_held.significant and lr_held.dbic > 0) and \
-            (lr_lin.significant and lr_lin.dbic > 0 or rung_unsure or line) and refine_evals > 0:
+            (lr_lin.significant and lr_lin.dbic > 0 or rung_unsure or line or absorbed) and refine_evals > 0:
         # the signature is in the residual, but at the base parameters that compensated for the
         # effect the FMU cannot show it (a quarter heavier cart: at the base's CoRs its fitted mass
         # raised S threefold, and Levenberg-Marquardt on both from there stopped above the base):
@@ -171,7 +173,7 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
         try:
             if regrow_evals > 0:
                 joint = widened(sc.effect, stage2)
-                xj, S_j, sim_j, info = regrow(joint, x_held_full, joint.free if ladder or line else base.free, w,
+                xj, S_j, sim_j, info = regrow(joint, x_held_full, joint.free if ladder or line or absorbed else base.free, w,
                                               evals=regrow_evals, seed=seed + 3, profile_points=profile_points,
                                               journal=out / f"round{number}_joint_{sc.effect}.jsonl" if out else None)
                 refined["joint"] = {"S_start": S_h, "S": S_j, "nfev": info["nfev"], "windows": info["windows"]}
