@@ -216,6 +216,11 @@ def run_case(case: dict, budget: dict = BUDGET) -> dict:
                            "amplitude": ev.amplitude, "why_not": ev.why_not},
                        "tests": [(t.effect, t.lr.p_adj, t.lr.dbic, t.holdout.gain if t.holdout else None, t.supported,
                                   t.S / problem.samples.size, t.why_not) for t in r.tests],
+                       # the fit with the base (candidates.examine_candidate), S per sample from each start
+                       "joint_fits": {t.effect: [{"first_window": j.get("first_window", "effect held"),
+                                                  "S_per_sample": j["S"] / problem.samples.size}
+                                                 for j in t.refined.get("joint_starts", [])]
+                                      for t in r.tests if t.refined.get("joint_starts")},
                        "S_base_per_sample": r.S_base / problem.samples.size,
                        "departures": [(d.family, d.label, d.test.p_adj, d.test.dbic) for d in r.departures],
                        "ranking": [(h.effect, h.share) for h in r.attribution.ranking[:4]],
