@@ -76,6 +76,8 @@ class IdentificationProblem:
     name: str = "measurement"
     tare: Optional[np.ndarray] = None    # per force channel, N: zero tolerance taken out (None: Eq. 10-12 as is)
     anti_alias: Optional[tuple] = None   # (order, cutoff Hz, causal): the logger's Butterworth filter, if declared
+    filter_rate: Optional[float] = None  # Hz, the rate the logger runs that filter at (meta.json
+                                         # sensor.internal_rate_Hz); None: the communication grid's
     sample_rate: Optional[float] = None  # Hz; None: read off the times (triggered.sample_rate_of)
     protocol: Protocol = field(default_factory=Protocol)  # what the sorter did (lss_fmu.protocol)
     v_nominal: Optional[float] = None    # the record's nominal set point (scales a speed-step's v_from)
@@ -190,22 +192,34 @@ class IdentificationProblem:
         return self._through_filter(x, extra)
 
     def _through_filter(self, x, extra) -> np.ndarray:
-        """The simulation through the logger's declared anti-alias filter: on the
-        communication grid (half the sample spacing) from FILTER_LEAD s before
-        the trigger, so that the filter's 4 ms of group delay is in the model and
-        not in the residual."""
+        """The simulation through the logger's declared anti-alias filter, from
+        FILTER_LEAD s before the trigger, so that the filter's 4 ms of group delay
+        is in the model and not in the residual: simulated on the communication
+        grid (half the sample spacing), filtered there or, when the record
+        declares the logger's internal rate, interpolated onto that rate's grid
+        and filtered at it, as the logger does."""
         from scipy import signal
         from lss_fmu.sensor import interp_cubic
         order, cutoff, causal = self.anti_alias
         h = 0.5 / self.rate
-        grid = np.arange(-int(np.ceil(FILTER_LEAD / h)), int(np.ceil(self.times[-1] / h)) + 3) * h
+        refilter = bool(self.filter_rate) and abs(self.filter_rate * h - 1.0) > 1e-9
+        tail = 6 if refilter else 3   # the cubics' support past the last sample, on each grid
+        grid = np.arange(-int(np.ceil(FILTER_LEAD / h)), int(np.ceil(self.times[-1] / h)) + tail) * h
         y = self.run(x, extra, times=grid, history=FILTER_LEAD + 2 * h)
+        t0 = grid[0]
+        if refilter:
+            # the filter where the logger runs it: a digital Butterworth's response depends on its
+            # rate (at 600 Hz instead of the logger's 1200 Hz the joint force's start and stop
+            # transients leave up to 0.7 noise variances at the truth, docs/identification.md)
+            hf = 1.0 / self.filter_rate
+            fine = np.arange(int(np.ceil(grid[1] / hf)), int(np.floor(grid[-2] / hf)) + 1) * hf
+            y, t0, h = interp_cubic(grid[0], h, y, fine), fine[0], hf
         sos = signal.butter(int(order), float(cutoff), btype="low", output="sos", fs=1.0 / h)
         if causal:
             y, _ = signal.sosfilt(sos, y, axis=0, zi=signal.sosfilt_zi(sos)[:, :, None] * y[0])
         else:
             y = signal.sosfiltfilt(sos, y, axis=0)
-        return interp_cubic(grid[0], h, y, self.times)
+        return interp_cubic(t0, h, y, self.times)
 
     def model_constants(self, names: Sequence[str] = ("cart.r_drive", "track.length", "chain.n_carts")) -> dict:
         """Calculated parameters of the model this problem simulates (its layout
@@ -308,9 +322,11 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
     if aa is not None and len(t) > 1 and aa[1] >= 0.99 / float(np.median(np.diff(t))):
         log.warning("%s: anti-alias filter at %g Hz is not below the sample rate; not modelled", meas.id, aa[1])
         aa = None
+    filter_rate = filter_rate_of(meas.meta, aa, float(meas.sample_rate)) if aa is not None else None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
-                                 name=meas.id, tare=tol, anti_alias=aa, sample_rate=meas.sample_rate,
+                                 name=meas.id, tare=tol, anti_alias=aa, filter_rate=filter_rate,
+                                 sample_rate=meas.sample_rate,
                                  protocol=protocol, v_nominal=float(meas.meta["speed_nominal"]), objective=objective,
                                  noise=noise, sim=sim or LazySimulator())
 
@@ -330,6 +346,32 @@ def anti_alias_of(meta: Optional[Mapping]) -> Optional[tuple]:
     if not (1 <= order <= 10 and cutoff > 0):
         raise ValueError(f"sensor.anti_alias_filter {text!r}: order 1-10 and a positive cutoff expected")
     return order, cutoff, "zero-phase" not in text.lower()
+
+
+MAX_FILTER_RATE = 1e6   # Hz: a logger's internal rate above it is refused (the grid would not fit in memory)
+
+
+def filter_rate_of(meta: Optional[Mapping], anti_alias: tuple, sample_rate: float) -> Optional[float]:
+    """The rate the logger runs its anti-alias filter at (meta.json
+    sensor.internal_rate_Hz), Hz; None if not declared (the filter then runs on
+    the communication grid, twice the sample rate). A declared rate below the
+    sample rate, not above twice the filter's cutoff, not finite or above
+    MAX_FILTER_RATE is refused with the field and the value."""
+    value = ((meta or {}).get("sensor") or {}).get("internal_rate_Hz")
+    if value is None:
+        return None
+    field_ = "sensor.internal_rate_Hz"
+    try:
+        rate = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{field_} = {value!r}: a rate in Hz expected") from None
+    if not (math.isfinite(rate) and sample_rate <= rate <= MAX_FILTER_RATE):
+        raise ValueError(f"{field_} = {value!r}: the logger's internal rate must lie between the sample rate "
+                         f"({sample_rate:g} Hz) and {MAX_FILTER_RATE:g} Hz")
+    if not anti_alias[1] < 0.5 * rate:
+        raise ValueError(f"{field_} = {value!r}: the anti-alias filter's cutoff ({anti_alias[1]:g} Hz) must lie "
+                         f"below half the rate it runs at")
+    return rate
 
 
 def transducer_for(track, s_m: float, v: float, settle: float) -> int:
