@@ -210,7 +210,7 @@ class IdentificationProblem:
         if refilter:
             # the filter where the logger runs it: a digital Butterworth's response depends on its
             # rate (at 600 Hz instead of the logger's 1200 Hz the joint force's start and stop
-            # transients leave up to 0.7 noise variances at the truth, docs/identification.md)
+            # transients left up to 0.8 noise variances at the truth, docs/identification.md)
             hf = 1.0 / self.filter_rate
             fine = np.arange(int(np.ceil(grid[1] / hf)), int(np.floor(grid[-2] / hf)) + 1) * hf
             y, t0, h = interp_cubic(grid[0], h, y, fine), fine[0], hf
@@ -322,7 +322,10 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
     if aa is not None and len(t) > 1 and aa[1] >= 0.99 / float(np.median(np.diff(t))):
         log.warning("%s: anti-alias filter at %g Hz is not below the sample rate; not modelled", meas.id, aa[1])
         aa = None
-    filter_rate = filter_rate_of(meas.meta, aa, float(meas.sample_rate)) if aa is not None else None
+    try:
+        filter_rate = filter_rate_of(meas.meta, aa, float(meas.sample_rate)) if aa is not None else None
+    except ValueError as exc:
+        raise ValueError(f"{getattr(meas, 'path', None) or meas.id}/meta.json: {exc}") from None
     return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
                                  name=meas.id, tare=tol, anti_alias=aa, filter_rate=filter_rate,

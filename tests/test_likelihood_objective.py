@@ -86,6 +86,22 @@ def test_a_record_without_its_noise_is_refused_by_name(record, tmp_path, spoil, 
     from_measurement(meas, "LW")                         # the paper's objective does not need it
 
 
+@pytest.mark.parametrize("rate, fragment", [("fast", "'fast'"), (150.0, "150.0"), (1e9, "1000000000.0")])
+def test_a_logger_rate_that_cannot_be_is_refused_by_name(record, tmp_path, rate, fragment):
+    """sensor.internal_rate_Hz sets where the simulated forces are filtered:
+    one below the sample rate (300 Hz), absurdly high or not a number is
+    refused with the file, the field and the value (the cutoff's check:
+    tests/test_sensor_in_objective.py)."""
+    meta = json.loads((record.path / M.META_FILE).read_text())
+    meta["sensor"]["internal_rate_Hz"] = rate
+    M.write_measurement(tmp_path / "m", record.samples, meta)
+    meas = M.load_measurement(tmp_path / "m")
+    with pytest.raises(ValueError) as info:
+        from_measurement(meas, "LW")
+    msg = str(info.value)
+    assert "meta.json" in msg and "sensor.internal_rate_Hz" in msg and fragment in msg, msg
+
+
 def test_no_interval_is_claimed_from_a_fit_above_the_noise(record):
     """With the noise declared, a fit that stays far above it (here the CoRs
     0.2 off, the drive at the truth) gets no interval: every variable is
