@@ -18,11 +18,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Optional
 
 import numpy as np
 
@@ -30,108 +29,12 @@ from .complex_rf import minimize_complex
 from lss_fmu.design import symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
+from .journal import Journal, JournaledObjective, _key, journaled_map
 from .optim_result import ComplexResult, jsonable
 from .problem import LINEARISABLE, IdentificationProblem
 
 
 log = logging.getLogger(__name__)
-
-
-def _key(x) -> str:
-    return np.asarray(x, float).tobytes().hex()
-
-
-def point_of(key: str) -> np.ndarray:
-    """The point a _key was made from (the start of a stored refinement: JOURNAL.local.json)."""
-    return np.frombuffer(bytes.fromhex(key), dtype=float).copy()
-
-
-class Journal:
-    """Evaluations on disk: x -> f, appended line by line."""
-
-    def __init__(self, path: Optional[Path]):
-        self.path = Path(path) if path else None
-        self.cache: dict[str, float] = {}
-        self.replayed = 0
-        if self.path and self.path.exists():
-            good = 0  # bytes of whole, readable lines
-            with open(self.path, "rb") as fh:
-                for line in fh:
-                    try:
-                        if not line.endswith(b"\n"):
-                            raise ValueError("line without its end")
-                        rec = json.loads(line)
-                        k, f = rec["k"], float(rec["f"])
-                    except (ValueError, KeyError, TypeError):
-                        break  # a line cut by the interruption: everything after it is redone
-                    self.cache[k] = f
-                    good += len(line)
-            if good < self.path.stat().st_size:
-                # drop the cut line, or the next record would be glued onto it and
-                # lost, with everything after it, at the next restart
-                with open(self.path, "r+b") as fh:
-                    fh.truncate(good)
-        self._fh = open(self.path, "a") if self.path else None
-
-    def get(self, x) -> Optional[float]:
-        f = self.cache.get(_key(x))
-        if f is not None:
-            self.replayed += 1
-        return f
-
-    def put(self, x, f: float) -> None:
-        k = _key(x)
-        self.cache[k] = f
-        if self._fh:
-            self._fh.write(json.dumps({"k": k, "x": list(map(float, x)), "f": f}) + "\n")
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
-
-    def close(self) -> None:
-        if self._fh:
-            self._fh.close()
-            self._fh = None
-
-
-class JournaledObjective:
-    """The problem's objective behind the journal (picklable for workers)."""
-
-    def __init__(self, problem: IdentificationProblem, journal: Journal):
-        self.problem, self.journal = problem, journal
-        self.evaluated = 0
-
-    def __call__(self, x) -> float:
-        f = self.journal.get(x)
-        if f is None:
-            self.evaluated += 1
-            f = self.problem(x)  # an exception is not journaled: the optimiser makes it a bad point
-            self.journal.put(x, f)
-        return f
-
-
-def journaled_map(journal: Journal, executor) -> Callable:
-    """A `map_fn` for the parallel optimiser: the journal answers what it
-    knows; the executor's workers (one FMU instance each) apply `fn`, the
-    optimiser's wrapped objective (`SafeObjective`), to the rest. An exception
-    in a worker thus comes back as a bad point with its message, which the
-    optimiser logs and ranks worst; the run goes on. Values are journaled as
-    they come back; an evaluation that raised is not journaled (as in the
-    serial case) and is tried again after a restart."""
-    counter = {"evaluated": 0}
-
-    def _map(fn: Callable, xs: Sequence) -> list:
-        out: list = [journal.get(x) for x in xs]
-        todo = [i for i, f in enumerate(out) if f is None]
-        if todo:
-            counter["evaluated"] += len(todo)
-            for i, r in zip(todo, executor.map(fn, [xs[i] for i in todo])):
-                out[i] = r
-                f, err = (r[0], r[2]) if isinstance(r, tuple) and len(r) == 3 else (r, None)
-                if err is None:  # a value (possibly non-finite) the objective returned
-                    journal.put(xs[i], float(f))
-        return out  # journal answers as plain values, the rest as (f, bad, error)
-    _map.counter = counter
-    return _map
 
 
 @dataclass
@@ -236,6 +139,7 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
     if pre is not None:
         problem = dataclasses.replace(problem, x0={**(problem.x0 or {}), **pre.problem.values(pre.x)})
     jr = Journal(journal)
+    jr.vouch(problem, len(problem.bounds_array), getattr(problem, "bad_value", None))   # not another objective's journal
     x0 = problem.x0_vector()
     if x0 is None:
         x0 = np.array([0.5 * (lo + hi) for lo, hi in problem.bounds_array])
@@ -310,7 +214,10 @@ def _local(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optiona
     if refine_evals <= 0 and not uncertainty:
         return {}
     side = Path(journal).with_suffix(".local.json") if journal else None
-    key = {"start": _key(x), "refine_evals": int(refine_evals), "uncertainty": bool(uncertainty)}
+    # f at the start, as this objective gives it: a refinement kept from an objective that has changed
+    # since (journal.vouch) is not taken up
+    key = {"start": _key(x), "f_start": float(f), "refine_evals": int(refine_evals),
+           "uncertainty": bool(uncertainty)}
     if side is not None and side.exists():
         try:
             kept = json.loads(side.read_text())
