@@ -102,11 +102,11 @@ class Journal:
             f_new = math.nan
         if abs(f_new - f_old) <= VOUCH_RTOL * max(1.0, abs(f_old)):
             return True
+        n_points = len(self.cache)
         where = self._set_aside()
-        log.warning("journal %s: its best point gives f = %.6g now, it holds %.6g (%d points of %s): another "
-                    "record, setting, FMU or code wrote it; set aside as %s, the run starts afresh",
-                    self.path, f_new, f_old, len(self.cache), f"{x.size} variables" if x.size != dim else
-                    "the same variables", where)
+        log.warning("journal %s: its best point gives f = %.6g now, it holds %.6g (%d points, %d variables for "
+                    "%d): another record, setting, FMU or code wrote it; set aside as %s, the run starts afresh",
+                    self.path, f_new, f_old, n_points, x.size, dim, where)
         return False
 
     def _set_aside(self) -> Optional[Path]:
