@@ -142,3 +142,18 @@ def machine() -> str:
         pass
     return (f"{model}, {cores} cores{mem}; {platform.system()} {platform.release()}; "
             f"Python {platform.python_version()}; CC {os.environ.get('CC', 'gcc')} {' '.join(build.CFLAGS)}")
+
+
+def code_version() -> str:
+    """The commit a result was computed on, '+changes' when the model or
+    identification code differs from it (so a table says which code it is from)."""
+    import subprocess
+    root = Path(__file__).resolve().parents[1]
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True,
+                             text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "fmu_src", "lss_fmu", "identification"],
+                               cwd=root, capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return rev + ("+changes" if dirty else "")

@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from bench_common import code_version  # noqa: E402
 from identification.campaign import run_campaign  # noqa: E402
 from identification.joint import JointProblem  # noqa: E402
 from identification.problem import drive_known, from_measurement  # noqa: E402
@@ -62,7 +63,8 @@ def rows_of(results: list, data: Path, window, tare: bool, cache: dict, objectiv
         key = r["measurement"]
         if key not in cache:
             cache[key] = f_truth(meas_dir, window, tare, objective)
-        row = {"measurement": key, "number": r.get("number"), "layout": r.get("layout"), "f": r["f"],
+        row = {"measurement": key, "number": r.get("number"), "layout": r.get("layout"), "code": r.get("code"),
+               "f": r["f"],
                "f_truth": cache[key], "ratio": r["f"] / cache[key] if cache[key] > 0 else float("nan"),
                "cpu_s": r.get("cpu_s"), "nfev": r["nfev"], "refined": r.get("refined"),
                "protocol": (r.get("protocol") or {}).get("name", "steady"),
@@ -149,7 +151,7 @@ def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
                 r = res.to_dict()
                 r.update({"cpu_s": time.process_time() - c0, "number": n, "layout": m.layout,
                           "measurement": res.problem.name, "measurement_dir": str(data / f"m{n:02d}"),
-                          "records": len(parts)})
+                          "records": len(parts), "code": code_version()})
                 # at the window used
                 r["f_truth"] = float(res.problem(np.array([truth[q] for q in res.problem.free])))
             finally:
@@ -249,8 +251,12 @@ def main(argv=None) -> int:
             results = joint_records(data, runs / folder, numbers, args, tare)
             cache = {r["measurement"]: r["f_truth"] for r in results}
             rows = rows_of(results, data, args.window, tare, cache, args.objective)
-            entry = {"rows": rows, "summary": summary(rows), "wall_s": time.time() - t0}
             label += " (CoRs only)" if args.cors_only else " (ten free)"
+            # a table grows over several sessions (build/ is not kept): the stored rows of the
+            # measurements not run this time stay
+            kept = [q for q in (report["protocols"].get(label) or {}).get("rows", []) if q["number"] not in numbers]
+            rows = sorted(kept + rows, key=lambda q: q["number"] or 0)
+            entry = {"rows": rows, "summary": summary(rows), "wall_s": time.time() - t0}
             report["protocols"][label] = entry
             print(f"\n## {label}\n\n{table(rows)}\n\n{json.dumps(entry['summary'], indent=1)}")
             if args.json:
