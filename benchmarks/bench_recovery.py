@@ -64,8 +64,7 @@ def rows_of(results: list, data: Path, window, tare: bool, cache: dict, objectiv
         if key not in cache:
             cache[key] = f_truth(meas_dir, window, tare, objective)
         row = {"measurement": key, "number": r.get("number"), "layout": r.get("layout"), "code": r.get("code"),
-               "f": r["f"],
-               "f_truth": cache[key], "ratio": r["f"] / cache[key] if cache[key] > 0 else float("nan"),
+               "f": r["f"], "f_truth": cache[key], "ratio": r["f"] / cache[key] if cache[key] > 0 else float("nan"),
                "cpu_s": r.get("cpu_s"), "nfev": r["nfev"], "refined": r.get("refined"),
                "protocol": (r.get("protocol") or {}).get("name", "steady"),
                "window_s": r.get("window_s"), "windows": [w["window_s"] for w in r.get("windows") or []]}
@@ -140,7 +139,7 @@ def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
                 parts.append(drive_known(pk, tk) if args.cors_only else pk)
                 truth = {**tk, **truth} if k == 0 else {**truth, own(k): tk[own(0)]}
             p = parts[0] if len(parts) == 1 else JointProblem(parts)
-            c0 = time.process_time()
+            c0, code = time.process_time(), code_version()   # the code at the start: HEAD may move during a run
             try:
                 more = {"start": args.start} if args.grown and args.start != "complex" else {}
                 res = run(p, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
@@ -151,7 +150,7 @@ def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
                 r = res.to_dict()
                 r.update({"cpu_s": time.process_time() - c0, "number": n, "layout": m.layout,
                           "measurement": res.problem.name, "measurement_dir": str(data / f"m{n:02d}"),
-                          "records": len(parts), "code": code_version()})
+                          "records": len(parts), "code": code})
                 # at the window used
                 r["f_truth"] = float(res.problem(np.array([truth[q] for q in res.problem.free])))
             finally:
