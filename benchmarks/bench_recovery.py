@@ -202,9 +202,10 @@ def main(argv=None) -> int:
     ap.add_argument("--grown", action="store_true",
                     help="identification.identify_grown: the complex on the first 0.3 s (--max-evals), then "
                          "Levenberg-Marquardt over growing windows (--refine-evals after it)")
-    ap.add_argument("--start", default="complex", choices=("complex", "single"),
+    ap.add_argument("--start", default="complex", choices=("complex", "single", "auto"),
                     help="with --grown and --repeats > 1: where the joint fit starts (identification.joint_start: "
-                         "'single', the first record alone, then the others' trigger points)")
+                         "'single', the first record alone, then the others' trigger points; 'auto', the "
+                         "complex and, where its first window is above the noise, 'single' as well)")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")

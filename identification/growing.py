@@ -25,7 +25,7 @@ import logging
 import math
 import time
 from pathlib import Path
-from typing import Mapping, Optional, Sequence
+from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from .identify import identify
 from .noise import noise_levels
 from .problem import IdentificationProblem, tared
 from .refine import refine
+from .uncertainty import at_noise
 from .windowing import truncated
 
 log = logging.getLogger(__name__)
@@ -70,7 +71,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
          first: float = FIRST, growth: float = GROWTH, profile_points: int = 9, seed: int = 0,
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
-         reset_unseen: bool = False, start: Optional[Sequence[float]] = None) -> tuple:
+         reset_unseen: bool = False, start: Optional[Sequence[float]] = None,
+         retry: Optional[Callable[[], tuple]] = None) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -93,7 +95,12 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     lists them (`unseen`). `start`: a point to take the first window up from
     instead of the complex (Levenberg-Marquardt there; nothing is reset: the
     point is not the complex's random leftover, nor is it profiled again):
-    identification.joint_start.
+    identification.joint_start. `retry`: called (no arguments; returns a
+    point and the simulations it spent) when the complex's first window
+    stays above the declared noise (uncertainty.at_noise; the likelihood
+    objective only); Levenberg-Marquardt on the first window from that
+    point, and the better of the two goes on (`info["retry"]`). Where the
+    complex's first window is at the noise nothing changes.
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -126,10 +133,13 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         nfev += r1.nfev
         if np.isfinite(r1.f) and r1.f < S:
             x1, S = np.asarray(r1.x, float), float(r1.f)
-    unseen = []
+    unseen, retried = [], None
     if reset_unseen and start is None:
         x1, unseen = _reset_unseen(q1, x1, w, S)
         nfev += 2 * len(q1.free)
+    if retry is not None and start is None and not hold and at_noise(q1, S / np.shape(q1.samples)[0]) is False:
+        x1, S, unseen, retried, used = _retried(q1, x1, S, unseen, retry, w, per_window)
+        nfev += used
     vals = {**{n: problem.x0[n] for n in hold}, **dict(zip(q1.free, map(float, x1)))}
     x = np.array([vals[n] for n in problem.free])
     trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
@@ -145,7 +155,28 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         trail.append({"window_s": t, "S_per_sample": float(r.f) / q.samples.size})
         if keep_points:
             trail[-1]["x"] = x.tolist()
-    return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0, "unseen": unseen}
+    return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0, "unseen": unseen,
+               "retry": retried}
+
+
+def _retried(q1, x1, S, unseen, retry, w, per_window) -> tuple:
+    """(x, S, unseen, what happened, simulations): the retry's point,
+    refined on the first window, where it fits that window better than the
+    complex's (then nothing is left reset: the point is not the complex's)."""
+    lo, hi = np.array(q1.bounds_array, float).T
+    xr, used = retry()
+    xr = np.clip(np.asarray(xr, float), lo, hi)
+    r = refine(q1, xr, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
+    used = int(used) + r.nfev
+    Sr = float(r.f) if np.isfinite(r.f) else np.inf
+    n = q1.samples.size
+    taken = Sr < S
+    log.info("grow: the complex's first window above the noise (%.3g per sample); the retry's %.3g: %s",
+             S / n, Sr / n, "taken" if taken else "not taken")
+    info = {"S_per_sample_complex": S / n, "S_per_sample_retry": Sr / n, "taken": bool(taken)}
+    if taken:
+        return np.asarray(r.x, float), Sr, [], info, used
+    return x1, S, unseen, info, used
 
 
 def _reset_unseen(q, x, w, S) -> tuple:

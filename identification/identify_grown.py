@@ -40,7 +40,7 @@ from .windowing import LADDER, troubles, truncated
 
 log = logging.getLogger(__name__)
 
-STARTS = ("complex", "single")   # where a joint problem's first window starts (identification.joint_start)
+STARTS = ("complex", "single", "auto")   # where a joint problem's first window starts (identification.joint_start)
 PROFILE_POINTS = 9   # the profile of the least-determined variable on the first window (growing.grow)
 
 
@@ -59,7 +59,9 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     `windows`: the windows tried when shrinking). `start`: "complex" (the
     complex over every variable on the first window) or, for a joint problem,
     "single" (its first record alone, then the others' trigger points:
-    identification.joint_start). `workers`, `restarts` and
+    identification.joint_start) or "auto" (the complex, and where its first
+    window stays above the declared noise the single start as well, the
+    better of the two on that window going on: growing.grow's `retry`). `workers`, `restarts` and
     `presolve` are accepted for the common signature and not used: the
     first window's complex is short."""
     from .identify import IdentificationResult, _local, _safe_H
@@ -87,11 +89,20 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     if start == "single" and isinstance(problem, JointProblem) and w is not None:
         x_start, started = single_start(problem, w, evals=int(max_evals), first=first, seed=seed, journal=journal,
                                         profile_points=PROFILE_POINTS)
+    retry, box = None, {}
+    if start == "auto" and isinstance(problem, JointProblem) and w is not None:
+        def single_retry():
+            box["x"], box["info"] = single_start(problem, w, evals=int(max_evals), first=first, seed=seed,
+                                                 journal=journal, profile_points=PROFILE_POINTS)
+            return box["x"], box["info"]["nfev"]
+        retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start)
+                   start=x_start, retry=retry)
     if started is not None:
         info["nfev"] += started["nfev"]
+    elif info.get("retry") and info["retry"]["taken"]:
+        started = box["info"]
     f = float(problem(x))
     local = _local(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
@@ -106,6 +117,9 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
         message += (f"; started from the first record alone (its point at {taken['window_s']:.3g} s, S per sample "
                     f"{taken['S_per_sample']:.3g}) and the others' trigger points at "
                     + ", ".join(f"{t['trigger']:.4g}" for t in started["triggers"]) + " m")
+    if info.get("retry") and not info["retry"]["taken"]:
+        message += (f"; the first record alone tried and left (S per sample {info['retry']['S_per_sample_retry']:.3g}"
+                    f" on the first window against the complex's {info['retry']['S_per_sample_complex']:.3g})")
     if info.get("unseen"):
         message += f"; unseen on the first window, started from their start values: {', '.join(info['unseen'])}"
     if local.get("refined"):

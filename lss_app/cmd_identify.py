@@ -47,10 +47,11 @@ def register(sub, common) -> None:
                          "then Levenberg-Marquardt over windows growing to the whole record; with --shrink a "
                          "shorter window is taken up from the grown point at its length "
                          "(identification.identify_grown; pointwise or likelihood objective)")
-    ap.add_argument("--start", default="complex", choices=("complex", "single"),
+    ap.add_argument("--start", default="complex", choices=("complex", "single", "auto"),
                     help="with --grown and --with: where the joint fit starts; complex: over every variable on "
                          "the records' first window (default); single: the first record alone, then each "
-                         "further record's trigger point (identification.joint_start)")
+                         "further record's trigger point (identification.joint_start); auto: the complex, and where "
+                         "its first window stays above the declared noise the single start too, the better going on")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
     ap.add_argument("--shrink", action="store_true",
