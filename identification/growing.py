@@ -164,11 +164,15 @@ def _retried(q1, x1, S, unseen, retry, w, per_window) -> tuple:
     refined on the first window, where it fits that window better than the
     complex's (then nothing is left reset: the point is not the complex's)."""
     lo, hi = np.array(q1.bounds_array, float).T
-    xr, used = retry()
-    xr = np.clip(np.asarray(xr, float), lo, hi)
-    r = refine(q1, xr, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
-    used = int(used) + r.nfev
-    Sr = float(r.f) if np.isfinite(r.f) else np.inf
+    try:
+        xr, used = retry()
+        xr = np.clip(np.asarray(xr, float), lo, hi)
+        r = refine(q1, xr, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
+        used = int(used) + r.nfev
+        Sr = float(r.f) if np.isfinite(r.f) else np.inf
+    except Exception as exc:   # the complex's point stands
+        log.warning("grow: the retry failed: %s", exc)
+        used, Sr = 0, np.inf
     n = q1.samples.size
     taken = Sr < S
     log.info("grow: the complex's first window above the noise (%.3g per sample); the retry's %.3g: %s",

@@ -77,3 +77,82 @@ def test_the_single_start_is_the_first_record_and_the_others_triggers(two_record
     assert info["nfev"] > 40 + 52
     # the scan with the first record's values, as found, puts the second record's trigger near its truth
     assert abs(vals[own(1)] - truth[1][TRIGGER]) < 0.05
+
+
+class _Complex:
+    """What identify returns, for a stand-in complex that stops at `x`."""
+
+    def __init__(self, x):
+        self.x, self.nfev = np.asarray(x, float), 1
+
+
+def _joint_truth(records):
+    jp, truth = _joint(records)
+    return jp, np.array([{**truth[0], own(1): truth[1][TRIGGER]}[n] for n in jp.free])
+
+
+def test_a_retry_is_not_asked_where_the_complex_reaches_the_noise(two_records, monkeypatch):
+    jp, x_true = _joint_truth(two_records)
+    monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(x_true))
+
+    def no_retry():
+        raise AssertionError("retried although the complex's first window is at the noise")
+    w = 1.0 / np.asarray(jp.noise, float) ** 2
+    x, info = growing.grow(jp, channel_weights=w, profile_points=0, retry=no_retry, first=0.3, growth=3.0)
+    assert info["retry"] is None
+    assert info["windows"][0]["S_per_sample"] < 1.2
+
+
+def test_a_retry_replaces_a_complex_left_above_the_noise(two_records, monkeypatch):
+    jp, x_true = _joint_truth(two_records)
+    x_off = np.array(jp.x0_vector(), float)   # the start values: far above the noise on the first window
+    monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(x_off))
+    asked = []
+
+    def retry():
+        asked.append(1)
+        return x_true, 7
+    w = 1.0 / np.asarray(jp.noise, float) ** 2
+    x, info = growing.grow(jp, channel_weights=w, profile_points=0, retry=retry, reset_unseen=True, first=0.3,
+                           growth=3.0)
+    assert asked == [1]
+    r = info["retry"]
+    assert r["taken"] and r["S_per_sample_retry"] < 1.2 < r["S_per_sample_complex"]
+    assert info["unseen"] == []                      # nothing reset on the retry's point
+    assert info["windows"][0]["S_per_sample"] == pytest.approx(r["S_per_sample_retry"])
+    k = [jp.free.index(f"contact.{c}") for c in ("e_JA", "e_SW", "e_RW")]
+    assert np.allclose(x[k], x_true[k], atol=0.03)
+
+
+def test_a_failed_retry_leaves_the_complexs_point(two_records, monkeypatch):
+    jp, x_true = _joint_truth(two_records)
+    x_off = np.array(jp.x0_vector(), float)
+    monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(x_off))
+    w = 1.0 / np.asarray(jp.noise, float) ** 2
+    q = truncated(jp, jp.times[0] + 0.3)
+    S_off = weighted_residual(q, q.simulate(x_off), w)[1] / q.samples.size
+
+    def broken():
+        raise RuntimeError("the first record's complex could not start")
+    x, info = growing.grow(jp, channel_weights=w, profile_points=0, retry=broken, first=0.3, growth=3.0)
+    r = info["retry"]
+    assert not r["taken"] and r["S_per_sample_retry"] == np.inf
+    assert r["S_per_sample_complex"] == pytest.approx(S_off)
+    assert info["windows"][0]["S_per_sample"] == pytest.approx(S_off)   # the complex's point went on
+
+
+def test_the_auto_start_takes_the_first_record_where_the_complex_fails(two_records, monkeypatch):
+    from identification import identify_grown as ig
+    jp, x_true = _joint_truth(two_records)
+    monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(jp.x0_vector()))
+    single = {"single": [{"window_s": 0.6, "S_per_sample": 1.0}], "from_window_s": 0.6,
+              "triggers": [{"record": 1, "trigger": float(x_true[jp.free.index(own(1))]), "S_per_sample": 1.0}],
+              "nfev": 5}
+    monkeypatch.setattr(ig, "single_start", lambda *a, **k: (x_true, single))
+    monkeypatch.setattr(ig, "PROFILE_POINTS", 0)   # the stand-in complex's point left as it is
+    res = ig.identify_grown(jp, start="auto", max_evals=5, refine_evals=0)
+    assert "started from the first record alone" in res.message
+    k = [jp.free.index(f"contact.{c}") for c in ("e_JA", "e_SW", "e_RW")]
+    assert np.allclose(res.x[k], x_true[k], atol=0.03)
+    with pytest.raises(ValueError, match="start 'somewhere' is not one of complex, single, auto"):
+        ig.identify_grown(jp, start="somewhere")
