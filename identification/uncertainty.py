@@ -198,10 +198,11 @@ def fit_at_noise(problem, r: np.ndarray) -> Optional[bool]:
     return at_noise(problem, float(np.sum(np.mean(r ** 2, axis=0) / np.asarray(problem.noise, float) ** 2)))
 
 
-def at_noise(problem, f: float) -> Optional[bool]:
+def at_noise(problem, f: float, z: float = AT_NOISE_Z, margin: float = AT_NOISE_MARGIN) -> Optional[bool]:
     """The test of fit_at_noise on f itself (the likelihood objective's f is
-    that sum); None for the other objectives."""
+    that sum), `z` sd and `margin` of the mean allowed above it; None for the
+    other objectives."""
     if getattr(problem, "objective", "pointwise") != "likelihood":
         return None
     n, m = np.shape(problem.samples)
-    return bool(f <= m * (1.0 + AT_NOISE_MARGIN) + AT_NOISE_Z * np.sqrt(2.0 * m / n))
+    return bool(f <= m * (1.0 + margin) + z * np.sqrt(2.0 * m / n))
