@@ -218,7 +218,7 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     if not lr.dbic > 0:
         why.append(f"BIC prefers the base (dBIC = {lr.dbic:.1f})")
     if not ho.gain > 0:
-        why.append(f"no held-out gain ({100 * ho.gain:+.1f}% against the refitted base)")
+        why.append(f"no held-out gain ({ho.text()} against the refitted base)")
     x_e, S_e, sim_e = x_held_full, S_h, sim_h
     base_alt = None
     if not why:

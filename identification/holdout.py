@@ -28,6 +28,15 @@ class HoldOut:
     def gain(self) -> float:
         return (self.E_base - self.E_ext) / self.E_base if self.E_base > 0 else 0.0
 
+    def text(self) -> str:
+        """The gain as a user reads it: a share where the extension's
+        held-out error is at most twice the base's, else how many times the
+        base's it is (an extension that blows up on the other blocks: -420098%
+        says nothing a reader can use)."""
+        if self.gain >= -1.0 or not np.isfinite(self.E_ext):
+            return f"{100 * self.gain:+.1f}%" if np.isfinite(self.gain) else "extension failed"
+        return f"{self.E_ext / self.E_base:.3g} x the base's error"
+
     def to_dict(self) -> dict:
         return {"E_base": self.E_base, "E_ext": self.E_ext, "gain": self.gain, "blocks": self.blocks,
                 "evals": self.evals}

@@ -22,7 +22,7 @@ log = logging.getLogger(__name__)
 
 
 def stats_text(t: CandidateTest) -> str:
-    ho = "-" if t.holdout is None else f"{100 * t.holdout.gain:+.1f}%"
+    ho = "-" if t.holdout is None else t.holdout.text()
     return (f"LR statistic {t.lr.T:.1f} on {t.lr.dof:.1f} dof (scale {t.lr.scale:.2f}), p = {t.lr.p:.2g}, "
             f"Bonferroni p = {t.lr.p_adj:.2g} (m = {t.lr.m}); dBIC = {t.lr.dbic:+.1f}; held-out gain {ho}")
 

@@ -120,7 +120,7 @@ def evidence_section(rnd) -> list:
                   "held-out gain | verdict |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for t in tests:
             lr = t.lr
-            ho = "-" if t.holdout is None else f"{100 * t.holdout.gain:+.1f}%"
+            ho = "-" if t.holdout is None else t.holdout.text()
             why = t.status
             lines.append(f"| {t.effect} ({t.label}) | {lr.q} | {t.S:.5g} | {lr.dS:.4g} | {lr.scale:.3g} | "
                          f"{lr.dof:.2f} | {lr.T:.4g} | {lr.p:.3g} | {lr.p_adj:.3g} | {lr.dbic:+.1f} | {ho} | "

@@ -108,7 +108,7 @@ def _evidence(rnd) -> list:
     rows = ["| candidate | statistic T (dof) | p | Bonferroni p (m) | dBIC | held-out gain | verdict |",
             "|---|---|---|---|---|---|---|"]
     for t in rnd.tests:
-        ho = "-" if t.holdout is None else f"{100 * t.holdout.gain:+.1f}%"
+        ho = "-" if t.holdout is None else t.holdout.text()
         rows.append(f"| {t.effect} ({t.label}) | {t.lr.T:.4g} ({t.lr.dof:.2g}) | {t.lr.p:.2g} | "
                     f"{t.lr.p_adj:.2g} ({t.lr.m}) | {t.lr.dbic:+.1f} | {ho} | "
                     f"{t.status} |")
