@@ -142,6 +142,8 @@ def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
             c0, code = time.process_time(), code_version()   # the code at the start: HEAD may move during a run
             try:
                 more = {"start": args.start} if args.grown and args.start != "complex" else {}
+                if args.grown and args.halvings:
+                    more["halvings"] = args.halvings
                 res = run(p, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
                           progress=False, restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,
                           **more,
@@ -206,6 +208,8 @@ def main(argv=None) -> int:
                     help="with --grown and --repeats > 1: where the joint fit starts (identification.joint_start: "
                          "'single', the first record alone, then the others' trigger points; 'auto', the "
                          "complex and, where its first window is above the noise, 'single' as well)")
+    ap.add_argument("--halvings", type=int, default=0,
+                    help="with --grown: a window's step that leaves the noise is taken again in 2^N shorter ones")
     ap.add_argument("--cors-only", action="store_true",
                     help="the layout-dependent variables at their true values, the CoRs free (diagnostic)")
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
@@ -246,6 +250,8 @@ def main(argv=None) -> int:
             folder += "" if args.repeats == 1 else f"_k{args.repeats}"
             if args.grown and args.repeats > 1 and args.start != "complex":
                 folder, label = folder + f"_{args.start}", label + f", started from {args.start}"
+            if args.grown and args.halvings:
+                folder, label = folder + f"_h{args.halvings}", label + f", {2 ** args.halvings} substeps"
             if args.shrink and args.cors_only:
                 folder, label = folder + "_shrink", label + ", shorter windows"
             results = joint_records(data, runs / folder, numbers, args, tare)

@@ -47,7 +47,8 @@ PROFILE_POINTS = 9   # the profile of the least-determined variable on the first
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
                    progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 400,
                    uncertainty: bool = False, presolve: int = 0, shrink: bool = False,
-                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "complex"):
+                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "complex",
+                   halvings: int = 0):
     """The problem (an IdentificationProblem or a joint one) identified over
     a growing window: `max_evals` complex evaluations on the first `first`
     seconds, the profile there, Levenberg-Marquardt over growing windows in
@@ -61,7 +62,9 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     "single" (its first record alone, then the others' trigger points:
     identification.joint_start) or "auto" (the complex, and where its first
     window stays above the declared noise the single start as well, the
-    better of the two on that window going on: growing.grow's `retry`). `workers`, `restarts` and
+    better of the two on that window going on: growing.grow's `retry`).
+    `halvings`: a window's step that leaves the noise is taken again in
+    2^halvings shorter ones (growing.grow). `workers`, `restarts` and
     `presolve` are accepted for the common signature and not used: the
     first window's complex is short."""
     from .identify import IdentificationResult, _local, _safe_H
@@ -75,6 +78,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     if shrink and not uncertainty:
         raise ValueError("grown identification with shrink needs uncertainty=True: the roughness of the CoRs "
                          "decides the window")
+    if not 0 <= int(halvings) <= 4:
+        raise ValueError(f"grown identification: halvings = {halvings} must be 0 to 4")
     if start not in STARTS:
         raise ValueError(f"grown identification: start {start!r} is not one of {', '.join(STARTS)}")
     del workers, restarts, presolve
@@ -98,7 +103,7 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
         retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start, retry=retry)
+                   start=x_start, retry=retry, halvings=int(halvings))
     if started is not None:
         info["nfev"] += started["nfev"]
     elif info.get("retry") and info["retry"]["taken"]:

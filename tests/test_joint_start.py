@@ -156,3 +156,26 @@ def test_the_auto_start_takes_the_first_record_where_the_complex_fails(two_recor
     assert np.allclose(res.x[k], x_true[k], atol=0.03)
     with pytest.raises(ValueError, match="start 'somewhere' is not one of complex, single, auto"):
         ig.identify_grown(jp, start="somewhere")
+
+
+def test_a_step_that_leaves_the_noise_is_taken_again_in_shorter_ones(two_records, monkeypatch):
+    from types import SimpleNamespace
+    jp, x_true = _joint_truth(two_records)
+    monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(x_true))
+    calls = []
+
+    def fake_refine(q, x, **k):   # the direct step to the second window leaves the noise, shorter ones do not
+        calls.append(float(q.times[-1] - q.times[0]))
+        bad = len(calls) == 1
+        return SimpleNamespace(x=np.asarray(x, float), f=(3.0 if bad else 1.0) * q.samples.size, nfev=1)
+    monkeypatch.setattr(growing, "refine", fake_refine)
+    w = 1.0 / np.asarray(jp.noise, float) ** 2
+    x, info = growing.grow(jp, channel_weights=w, profile_points=0, first=0.3, growth=1.45, halvings=2)
+    t = [e["window_s"] for e in info["windows"]]
+    assert info["windows"][1].get("substeps") == 4 and info["windows"][1]["S_per_sample"] == pytest.approx(1.0)
+    sub = calls[1:5]   # four windows growing geometrically from the first to the second
+    assert sub == sorted(sub) and sub[0] > t[0] and sub[-1] == pytest.approx(t[1], abs=0.01)
+    assert not any("substeps" in e for e in info["windows"][2:])
+    calls.clear()
+    x, info = growing.grow(jp, channel_weights=w, profile_points=0, first=0.3, growth=1.45, halvings=0)
+    assert len(calls) == len(info["windows"]) - 1 and info["windows"][1]["S_per_sample"] == pytest.approx(3.0)
