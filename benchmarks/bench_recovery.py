@@ -141,7 +141,7 @@ def joint_records(data: Path, out: Path, numbers, args, tare: bool) -> list:
             p = parts[0] if len(parts) == 1 else JointProblem(parts)
             c0, code = time.process_time(), code_version()   # the code at the start: HEAD may move during a run
             try:
-                more = {"start": args.start} if args.grown and args.start != "complex" else {}
+                more = {"start": args.start} if args.grown else {}
                 if args.grown and args.halvings:
                     more["halvings"] = args.halvings
                 res = run(p, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,

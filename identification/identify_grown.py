@@ -47,7 +47,7 @@ PROFILE_POINTS = 9   # the profile of the least-determined variable on the first
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
                    progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 400,
                    uncertainty: bool = False, presolve: int = 0, shrink: bool = False,
-                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "complex",
+                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "auto",
                    halvings: int = 0):
     """The problem (an IdentificationProblem or a joint one) identified over
     a growing window: `max_evals` complex evaluations on the first `first`
@@ -60,9 +60,10 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     `windows`: the windows tried when shrinking). `start`: "complex" (the
     complex over every variable on the first window) or, for a joint problem,
     "single" (its first record alone, then the others' trigger points:
-    identification.joint_start) or "auto" (the complex, and where its first
-    window stays above the declared noise the single start as well, the
-    better of the two on that window going on: growing.grow's `retry`).
+    identification.joint_start) or "auto", the default (the complex, and
+    where its first window stays above the declared noise the single start
+    as well, the better of the two on that window going on: growing.grow's
+    `retry`; on one record, or without a declared noise, the complex).
     `halvings`: a window's step that leaves the noise is taken again in
     2^halvings shorter ones (growing.grow). `workers`, `restarts` and
     `presolve` are accepted for the common signature and not used: the

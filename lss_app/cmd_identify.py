@@ -47,11 +47,12 @@ def register(sub, common) -> None:
                          "then Levenberg-Marquardt over windows growing to the whole record; with --shrink a "
                          "shorter window is taken up from the grown point at its length "
                          "(identification.identify_grown; pointwise or likelihood objective)")
-    ap.add_argument("--start", default="complex", choices=("complex", "single", "auto"),
+    ap.add_argument("--start", default=None, choices=("complex", "single", "auto"),
                     help="with --grown and --with: where the joint fit starts; complex: over every variable on "
-                         "the records' first window (default); single: the first record alone, then each "
+                         "the records' first window; single: the first record alone, then each "
                          "further record's trigger point (identification.joint_start); auto: the complex, and where "
-                         "its first window stays above the declared noise the single start too, the better going on")
+                         "its first window stays above the declared noise the single start too, the better going on "
+                         "(default)")
     ap.add_argument("--refine-evals", type=int, default=REFINE_EVALS,
                     help=f"simulations of the local refinement after the complex (default {REFINE_EVALS}; 0: none)")
     ap.add_argument("--shrink", action="store_true",
@@ -80,7 +81,7 @@ def run(args) -> int:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
     if args.refine_evals < 0:
         raise ValueError(f"--refine-evals {args.refine_evals}: must be 0 or more")
-    if args.start != "complex" and not (args.grown and args.with_records):
+    if args.start not in (None, "complex") and not (args.grown and args.with_records):
         raise ValueError(f"--start {args.start}: where a joint fit starts, needs --grown and --with")
     model = parse_model(args.model)
     meas = load_measurement(args.measurement)
@@ -98,7 +99,7 @@ def run(args) -> int:
                         filename=str(out / "identify.log"))
     if args.staged and args.grown:
         raise ValueError("--staged and --grown: choose one pipeline")
-    more = {"start": args.start} if args.start != "complex" else {}
+    more = {"start": args.start or "auto"} if args.grown else {}
     res = identify_or_staged(problem, args.staged, args.shrink, args.grown, max_evals=args.max_evals, seed=args.seed,
                              journal=out / "journal.jsonl", progress=not args.no_progress, workers=args.workers,
                              restarts=args.restarts, refine_evals=args.refine_evals, uncertainty=True,

@@ -99,7 +99,7 @@ def test_grown_refuses_what_it_cannot_do(start_stop_layout1):
             identify_grown(p, max_evals=10, shrink=True)
         with pytest.raises(ValueError, match="staged or grown, not both"):
             run(p, True, False, True, max_evals=10)
-        with pytest.raises(ValueError, match="start 'first' is not one of complex, single"):
+        with pytest.raises(ValueError, match="start 'first' is not one of complex, single, auto"):
             identify_grown(p, max_evals=10, start="first")
     finally:
         p.sim.close()
