@@ -72,3 +72,33 @@ def test_refine_leaves_a_zero_error_within_the_tare_alone():
     r = refine(p, np.array([90.0, 39.9, 0.6, 0.0]), max_evals=200)
     assert r.f < 1e-8
     assert np.allclose(r.x[:3], truth[:3], rtol=1e-3, atol=1e-3), r.x
+
+
+class _Pair:
+    """A linear least-squares problem in two strongly correlated variables,
+    the first with its unconstrained optimum below its lower bound: the
+    constrained optimum has it on the bound and the second at its own
+    one-variable fit."""
+    free = ("u", "v")
+    bounds_array = [(0.0, 1.0), (-10.0, 10.0)]
+    tare = None
+
+    def __init__(self):
+        t = np.linspace(0.0, 1.0, 400)
+        self.times = t
+        self.A = np.stack([np.sin(3 * t), np.sin(3 * t) + 0.05 * np.cos(7 * t)], axis=1)
+        self.samples = np.repeat((self.A @ np.array([-1.0, 2.0]))[:, None], 7, axis=1) * np.arange(1, 8)
+
+    def simulate(self, x):
+        return np.repeat((self.A @ np.asarray(x, float))[:, None], 7, axis=1) * np.arange(1, 8)
+
+
+def test_refine_holds_a_variable_on_its_bound_and_solves_for_the_rest():
+    # clipping the joint step would move v as if u had gone below 0; the active set finds the
+    # constrained optimum (u on its bound, v the one-variable least squares) in a few steps
+    p = _Pair()
+    y = p.samples[:, 0]
+    v_best = float(p.A[:, 1] @ y / (p.A[:, 1] @ p.A[:, 1]))
+    r = refine(p, np.array([0.0, 0.0]), max_evals=40, f_rtol=1e-12)
+    assert r.x[0] == 0.0
+    assert abs(r.x[1] - v_best) < 1e-6 * abs(v_best), (r.x, v_best)
