@@ -185,7 +185,9 @@ def main(argv=None) -> int:
     ap.add_argument("--max-evals", type=int, default=600)
     ap.add_argument("--presolve", type=int, default=200)
     ap.add_argument("--refine-evals", type=int, default=160)
-    ap.add_argument("--restarts", type=int, default=0)
+    ap.add_argument("--restarts", type=int, default=0,
+                    help="with --grown: while a record is off the noise at the chosen window, again with the "
+                         "next seed, up to N times (folder suffix _rN)")
     ap.add_argument("--window", type=float, default=None)
     ap.add_argument("--no-tare", action="store_true")
     ap.add_argument("--workers", type=int, default=2)
@@ -252,6 +254,8 @@ def main(argv=None) -> int:
                 folder, label = folder + f"_{args.start}", label + f", started from {args.start}"
             if args.grown and args.halvings:
                 folder, label = folder + f"_h{args.halvings}", label + f", {2 ** args.halvings} substeps"
+            if args.grown and args.restarts:
+                folder, label = folder + f"_r{args.restarts}", label + f", up to {args.restarts} restarts"
             if args.shrink and args.cors_only:
                 folder, label = folder + "_shrink", label + ", shorter windows"
             results = joint_records(data, runs / folder, numbers, args, tare)

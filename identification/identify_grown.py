@@ -32,7 +32,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .growing import FIRST, grow
+from .growing import FIRST, grow, records_off
 from .joint import JointProblem
 from .joint_start import single_start
 from .problem import LINEARISABLE
@@ -65,10 +65,12 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     as well, the better of the two on that window going on: growing.grow's
     `retry`; on one record, or without a declared noise, the complex).
     `halvings`: a window's step that leaves the noise is taken again in
-    2^halvings shorter ones (growing.grow). `workers`, `restarts` and
-    `presolve` are accepted for the common signature and not used: the
-    first window's complex is short."""
-    from .identify import IdentificationResult, _local, _safe_H
+    2^halvings shorter ones (growing.grow). `restarts`: while a record's S
+    at the chosen window lies RETRY_Z sd above the declared noise
+    (growing.records_off), the whole identification again with the next
+    seed, at most `restarts` times; the better one goes on (`_better`).
+    `workers` and `presolve` are accepted for the common signature and not
+    used: the first window's complex is short."""
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
         raise ValueError(f"grown identification: the {problem.objective} objective is not a sum of squares "
                          f"(use one of {', '.join(LINEARISABLE)})")
@@ -83,7 +85,80 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
         raise ValueError(f"grown identification: halvings = {halvings} must be 0 to 4")
     if start not in STARTS:
         raise ValueError(f"grown identification: start {start!r} is not one of {', '.join(STARTS)}")
-    del workers, restarts, presolve
+    if int(restarts) < 0:
+        raise ValueError(f"grown identification: restarts = {restarts} must be 0 or more")
+    del workers, presolve
+    t0 = time.time()
+    once = dict(max_evals=max_evals, refine_evals=refine_evals, uncertainty=uncertainty, shrink=shrink,
+                ladder=ladder, first=first, start=start, halvings=halvings)
+    best = _once(problem, seed=seed, journal=journal, **once)
+    tried = [_tried(seed, best)]
+    kept = 0
+    for k in range(1, int(restarts) + 1):
+        if not tried[kept]["records_off"]:
+            break
+        log.info("%s: records %s off the noise at the chosen window: again with seed %s", problem.name,
+                 tried[kept]["records_off"], _next_seed(seed, k))
+        jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".s{k}.jsonl")
+        alt = _once(problem, seed=_next_seed(seed, k), journal=jr, **once)
+        tried.append(_tried(_next_seed(seed, k), alt))
+        if _better(problem, alt, tried[-1], best, tried[kept]):
+            best, kept = alt, len(tried) - 1
+    if len(tried) == 1:
+        return best
+    message = best.message + "; restarts: " + ", ".join(
+        f"seed {t['seed']} f = {t['f']:.4g} at {t['window_s']:.3g} s"
+        + (f" (records {t['records_off']} off the noise)" if t["records_off"] else "") for t in tried) \
+        + f"; seed {tried[kept]['seed']} kept"
+    nfev = sum(t["nfev"] for t in tried)
+    return dataclasses.replace(best, restarts=len(tried) - 1, message=message, seconds=time.time() - t0,
+                               nfev=nfev, evaluated=nfev)
+
+
+def _tried(seed, res) -> dict:
+    return {"seed": seed, "f": float(res.f), "window_s": float(res.problem.times[-1]), "records_off": _off(res),
+            "nfev": int(res.nfev) + 1}
+
+
+def _next_seed(seed, k: int):
+    return seed + k if isinstance(seed, (int, np.integer)) else k
+
+
+def _off(res) -> list:
+    """The records off the declared noise at the result's own window (no
+    declared noise: none)."""
+    q = res.problem
+    noise = getattr(q, "noise", None)
+    if noise is None:
+        return []
+    try:
+        return records_off(q, q.simulate(res.x), 1.0 / np.asarray(noise, float) ** 2)
+    except Exception:   # a point that does not simulate is off everywhere
+        return [-1]
+
+
+def _better(problem, b, tb: dict, a, ta: dict) -> bool:
+    """Whether identification b (its entry `tb`) is better than a: no record
+    off the noise at its window where a has one; else (both or neither) a
+    lower f on the shorter of their two windows."""
+    if bool(ta["records_off"]) != bool(tb["records_off"]):
+        return not tb["records_off"]
+    s = min(ta["window_s"], tb["window_s"])
+    q = truncated(problem, s) if s < float(problem.times[-1]) - 1e-9 else problem
+    return _safe_f(q, b.x) < _safe_f(q, a.x)
+
+
+def _safe_f(q, x) -> float:
+    try:
+        return float(q(np.asarray(x, float)))
+    except Exception:
+        return float("inf")
+
+
+def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start,
+          halvings):
+    """One grown identification (identify_grown without restarts)."""
+    from .identify import IdentificationResult, _local, _safe_H
     t0 = time.time()
     x0 = problem.x0_vector()
     if x0 is None:

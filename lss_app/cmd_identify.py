@@ -31,7 +31,9 @@ def register(sub, common) -> None:
                     "(default: all ten of Eq. 13)")
     ap.add_argument("--window", type=float, default=None, help="use only the first seconds of the record")
     ap.add_argument("--restarts", type=int, default=0,
-                    help="restart a converged complex around the best point up to N times (0: as published)")
+                    help="restart a converged complex around the best point up to N times (0: as published); "
+                         "with --grown: while a record stays off the noise at the chosen window, the whole "
+                         "identification again with the next seed, up to N times, the better kept")
     ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics", "likelihood"),
                     help="pointwise: the paper's Eq. 10-12 (default); statistics: spectra and amplitude "
                          "distributions per channel, for steady running; likelihood: the residual over the "

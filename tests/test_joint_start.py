@@ -192,3 +192,30 @@ def test_a_step_that_leaves_the_noise_is_taken_again_in_shorter_ones(two_records
     x, info = growing.grow(jp, channel_weights=w, profile_points=0, first=0.3, growth=1.45, halvings=0)
     assert len(calls) == len(info["windows"]) - 1 and info["windows"][1]["S_per_sample"] == pytest.approx(1.15)
     assert info["windows"][1]["records_off"] == [1]   # seen, but no step control asked
+
+
+def test_restarts_take_the_next_seed_while_a_record_is_off_the_noise(two_records, monkeypatch):
+    from types import SimpleNamespace
+
+    from identification import identify_grown as ig
+    jp, x_true = _joint_truth(two_records)
+    x_off = np.array(jp.x0_vector(), float)
+    seeds = []
+
+    def complex_by_seed(q, seed=0, **k):   # seed 0 stops off the truth, seed 1 on it
+        seeds.append(seed)
+        return _Complex(x_off if seed == 0 else x_true)
+    monkeypatch.setattr(growing, "identify", complex_by_seed)
+    monkeypatch.setattr(growing, "refine", lambda q, x, **k: SimpleNamespace(   # the windows move nothing
+        x=np.asarray(x, float), f=float(q(np.asarray(x, float))), nfev=1, sim=q.simulate(np.asarray(x, float))))
+    monkeypatch.setattr(ig, "PROFILE_POINTS", 0)
+    res = ig.identify_grown(jp, start="complex", max_evals=5, refine_evals=0, restarts=2)
+    assert seeds == [0, 1]                            # the second seed at the noise: no third
+    k = [jp.free.index(f"contact.{c}") for c in ("e_JA", "e_SW", "e_RW")]
+    assert np.allclose(res.x[k], x_true[k]) and res.restarts == 1
+    assert "seed 1 kept" in res.message and "off the noise" in res.message
+    seeds.clear()
+    res = ig.identify_grown(jp, start="complex", max_evals=5, refine_evals=0, restarts=0)
+    assert seeds == [0] and np.allclose(res.x[k], x_off[k])
+    with pytest.raises(ValueError, match="restarts = -1 must be 0 or more"):
+        ig.identify_grown(jp, restarts=-1)
