@@ -92,6 +92,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     once = dict(max_evals=max_evals, refine_evals=refine_evals, uncertainty=uncertainty, shrink=shrink,
                 ladder=ladder, first=first, start=start, halvings=halvings)
     best = _once(problem, seed=seed, journal=journal, **once)
+    if not int(restarts):
+        return best
     tried = [_tried(seed, best)]
     kept = 0
     for k in range(1, int(restarts) + 1):
