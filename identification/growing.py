@@ -199,9 +199,9 @@ def records_off(q, sim, w, z: float = RETRY_Z) -> list:
     """The records (column blocks of 7: a joint problem's records side by
     side) whose S at `sim` lies more than `z` sd of chi^2 above its mean,
     with no margin. Per record, as the joint S hides one record carried off
-    by the others' fit (m19 at 0.91 s: 1.14 per sample on its first record,
-    1.02 and 1.03 on the others, 1.06 together, at the noise by the joint
-    test)."""
+    by the others' fit (m19's fit at 1.2 s: 1.126 per sample on its first
+    record, 1.035 and 1.048 on the others, 1.07 together, at the noise by
+    the joint test of uncertainty.at_noise)."""
     r = tared(q.samples - sim, q.tare) ** 2 * np.asarray(w, float)
     n, m = r.shape
     k = len(FORCE_CHANNELS) if m % len(FORCE_CHANNELS) == 0 else m

@@ -118,9 +118,9 @@ def _bounded_step(AtA, Atb, lam, scale, x, lo, hi) -> np.ndarray:
     """The damped Gauss-Newton step with the variables that sit on a bound
     and would step out of it held (an active set), solved again for the
     others. Clipping the full step instead moves the others as if the held
-    one had moved too: on a correlated pair (m15's e_JR on its bound and
-    e_RW) the clipped step is not a descent and the damping grows until the
-    refinement stops short of the minimum on the bound."""
+    one had moved too: on a correlated pair the clipped step is not a
+    descent and the damping grows until the refinement stops short of the
+    minimum on the bound (tests/test_refine.py: 0.20 for 0.99)."""
     n = len(x)
     free = np.ones(n, bool)
     for _ in range(n):
