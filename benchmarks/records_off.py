@@ -16,12 +16,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from identification.growing import RETRY_Z, records_off  # noqa: E402
+from identification.growing import record_S, records_off  # noqa: E402
 from identification.joint import JointProblem  # noqa: E402
-from identification.problem import from_measurement, tared  # noqa: E402
+from identification.problem import from_measurement  # noqa: E402
 from identification.windowing import truncated  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
-from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -33,7 +32,6 @@ def main(argv=None) -> int:
     files = sorted(args.folder.glob("m*.json"))
     if not files:
         raise SystemExit(f"{args.folder}: no mNN.json results")
-    k7 = len(FORCE_CHANNELS)
     for f in files:
         r = json.loads(f.read_text())
         n, k = int(r["number"]), int(r.get("records", 1))
@@ -46,9 +44,7 @@ def main(argv=None) -> int:
             x = np.array([r["x"][v] for v in q.free])
             w = 1.0 / np.asarray(q.noise, float) ** 2
             sim = q.simulate(x)
-            s = tared(q.samples - sim, q.tare) ** 2 * w
-            per = [float(s[:, j * k7:(j + 1) * k7].mean()) for j in range(k)]
-            limit = 1.0 + RETRY_Z * np.sqrt(2.0 / (len(s) * k7))
+            per, limit = record_S(q, sim, w)
             print(f"m{n:02d}  window {r['window_s']:.3g} s  S per sample by record "
                   f"{' '.join(f'{v:.3f}' for v in per)}  limit {limit:.3f}  off {records_off(q, sim, w)}", flush=True)
         finally:

@@ -202,15 +202,18 @@ def records_off(q, sim, w, z: float = RETRY_Z) -> list:
     by the others' fit (m19's fit at 1.2 s: 1.126 per sample on its first
     record, 1.035 and 1.048 on the others, 1.07 together, at the noise by
     the joint test of uncertainty.at_noise)."""
+    per, limit = record_S(q, sim, w, z)
+    return [j for j, S in enumerate(per) if S > limit]
+
+
+def record_S(q, sim, w, z: float = RETRY_Z) -> tuple:
+    """(S per sample of each record at `sim`, the limit records_off puts on
+    it: 1 + z sd of chi^2)."""
     r = tared(q.samples - sim, q.tare) ** 2 * np.asarray(w, float)
     n, m = r.shape
     k = len(FORCE_CHANNELS) if m % len(FORCE_CHANNELS) == 0 else m
-    out = []
-    for j in range(m // k):
-        S = float(np.sum(r[:, j * k:(j + 1) * k]))
-        if S > n * k + z * np.sqrt(2.0 * n * k):
-            out.append(j)
-    return out
+    per = [float(np.mean(r[:, j * k:(j + 1) * k])) for j in range(m // k)]
+    return per, 1.0 + z * np.sqrt(2.0 / (n * k))
 
 
 def _substeps(problem, x, t_from, t_to, duration, n, per_window, w) -> tuple:
