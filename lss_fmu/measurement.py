@@ -315,6 +315,7 @@ def validate_meta(meta, path="meta.json", folder: Optional[Path] = None, check_l
         raise MeasurementError(f"{meta['sample_rate']!r} Hz is beyond {MAX_SAMPLE_RATE:g} Hz", path, "sample_rate")
     if "sensor" in meta:
         force_ranges(meta, path)
+        sensor_spreads(meta, path)
     try:
         _parse_date(meta["date"])
     except ValueError:
@@ -354,6 +355,28 @@ def force_ranges(meta: Optional[Mapping], path="meta.json") -> dict:
                                    "sensor.force_range_N")
         out[c] = float(v)
     return out
+
+
+def sensor_spreads(meta: Optional[Mapping], path="meta.json") -> None:
+    """Check meta.json's sensor.force_noise_std_N (each > 0: the likelihood
+    weighs a channel by 1 / sigma^2) and sensor.force_offset_std_N (each >= 0);
+    a channel left out is the virtual cart's or estimated where it is used."""
+    sensor = (meta or {}).get("sensor")
+    if not isinstance(sensor, dict):
+        return
+    for key, least in (("force_noise_std_N", "positive"), ("force_offset_std_N", "not negative")):
+        spec = sensor.get(key)
+        if spec is None:
+            continue
+        field = f"sensor.{key}"
+        if not isinstance(spec, dict):
+            raise MeasurementError(f"must be an object {{force channel: N}}, got {_json_kind(spec)}", path, field)
+        for c, v in spec.items():
+            if c not in FORCE_CHANNELS:
+                raise MeasurementError(f"unknown force channel {str(c)[:40]!r}", path, field)
+            ok = _type_ok(v, "number") and math.isfinite(v) and (v > 0 if least == "positive" else v >= 0)
+            if not ok:
+                raise MeasurementError(f"{c}: must be a {least} number of newtons, got {_json_kind(v)}", path, field)
 
 
 def _listed(names, k: int = MAX_LISTED) -> str:
@@ -470,7 +493,8 @@ def _validate_layout(meta, path, folder: Path) -> None:
 def read_meta(path: Union[str, Path], check_layout: bool = True) -> dict:
     path = Path(path)
     try:
-        text = _read_limited(path, MAX_META_BYTES).decode("utf-8")
+        # utf-8-sig: a spreadsheet's "UTF-8" export starts with a byte-order mark
+        text = _read_limited(path, MAX_META_BYTES).decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise MeasurementError(f"cannot read: {exc}", path) from None
     try:
@@ -582,7 +606,7 @@ def read_samples(path: Union[str, Path], sample_rate: float, force_range: Option
     path = Path(path)
     raw = _read_limited(path, MAX_SAMPLES_BYTES)
     try:
-        text = raw.decode("utf-8")
+        text = raw.decode("utf-8-sig")   # a byte-order mark (a spreadsheet's export) is not part of the header
     except UnicodeDecodeError as exc:
         line = raw[:exc.start].count(b"\n") + 1
         raise MeasurementError("not UTF-8 text", path, line=line) from None

@@ -121,7 +121,9 @@ class SensorModel:
             "internal_rate_Hz": self.internal_rate,
             "anti_alias_filter": f"Butterworth, order {self.filter_order}, {self.filter_cutoff:g} Hz, "
                                  + ("causal" if self.filter_causal else "zero-phase"),
-            "force_noise_std_N": dict(self.noise_std),
+            # a channel without noise is not declared (meta.json refuses sigma = 0: the likelihood
+            # weighs by 1 / sigma^2); where it is used its noise is estimated from the residual
+            "force_noise_std_N": {c: v for c, v in self.noise_std.items() if v > 0},
             "force_offset_std_N": dict(self.offset_std),
             "force_resolution_N": self.force_resolution,
             "wheel_speed": f"{self.pulses_per_rev} pulses per revolution counted in a sliding "

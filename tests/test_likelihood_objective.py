@@ -71,8 +71,6 @@ def test_refinement_minimises_the_same_metric(record):
 @pytest.mark.parametrize("spoil, fragment", [
     (lambda s: s.pop("force_noise_std_N"), "is not declared"),
     (lambda s: s["force_noise_std_N"].pop("transducer.joint.F_y"), "transducer.joint.F_y"),
-    (lambda s: s["force_noise_std_N"].update({"transducer.driving.F_left": -2.0}), "-2.0"),
-    (lambda s: s["force_noise_std_N"].update({"transducer.steering.F_left": "low"}), "'low'"),
 ])
 def test_a_record_without_its_noise_is_refused_by_name(record, tmp_path, spoil, fragment):
     meta = json.loads((record.path / M.META_FILE).read_text())
@@ -84,6 +82,28 @@ def test_a_record_without_its_noise_is_refused_by_name(record, tmp_path, spoil, 
     msg = str(info.value)
     assert "meta.json" in msg and "force_noise_std_N" in msg and fragment in msg, msg
     from_measurement(meas, "LW")                         # the paper's objective does not need it
+
+
+@pytest.mark.parametrize("field, channel, value, fragment", [
+    ("force_noise_std_N", "transducer.driving.F_left", -2.0, "-2.0"),
+    ("force_noise_std_N", "transducer.steering.F_left", "low", '"low"'),
+    ("force_noise_std_N", "transducer.joint.F_z", 0.0, "positive"),
+    ("force_noise_std_N", "transducer.joint.F_q", 2.0, "unknown force channel"),
+    ("force_offset_std_N", "transducer.joint.F_x", -15.0, "-15.0"),
+])
+def test_a_noise_or_offset_that_cannot_be_is_refused_on_loading(record, tmp_path, field, channel, value, fragment):
+    """Refused when the record is read (the close loop would otherwise fall back to an estimate)."""
+    meta = json.loads((record.path / M.META_FILE).read_text())
+    meta["sensor"][field][channel] = value
+    (tmp_path / "m").mkdir()
+    (tmp_path / "m" / M.META_FILE).write_text(json.dumps(meta))
+    (tmp_path / "m" / "samples.csv").write_text(M.format_samples(record.samples))
+    with pytest.raises(M.MeasurementError) as info:
+        M.load_measurement(tmp_path / "m")
+    msg = str(info.value)
+    assert "meta.json" in msg and f"sensor.{field}" in msg and fragment in msg, msg
+    if fragment != "unknown force channel":
+        assert channel in msg, msg
 
 
 @pytest.mark.parametrize("rate, fragment", [("fast", "'fast'"), (150.0, "150.0"), (1e9, "1000000000.0")])

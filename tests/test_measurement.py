@@ -121,6 +121,16 @@ def test_comments_and_crlf_accepted(meas):
     assert m.n_samples == 600
 
 
+def test_byte_order_mark_accepted(meas):
+    """A spreadsheet's "UTF-8 CSV" export starts each file with a byte-order mark."""
+    before = M.load_measurement(meas)
+    for name in ("samples.csv", "meta.json"):
+        p = meas / name
+        p.write_bytes(b"\xef\xbb\xbf" + p.read_bytes())
+    after = M.load_measurement(meas)
+    assert after.samples.equals(before.samples) and after.meta == before.meta
+
+
 def test_column_order_free_but_returned_canonical(meas):
     df = pd.read_csv(meas / "samples.csv", skiprows=[1])
     cols = list(reversed(M.COLUMNS))
