@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -93,13 +94,22 @@ def run_campaign(data_dir: Path, models: Sequence[str], out: Path, *, workers: i
     from lss_fmu.measurement import find_measurements
     models = [parse_model(m) for m in models]
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     if int(restarts) < 0:
         raise ValueError(f"restarts = {restarts}: must be 0 or more")
+    # refused before anything runs: each task would fail alone, after the pool had started
+    if int(max_evals) < 1:
+        raise ValueError(f"max_evals = {max_evals}: must be at least 1")
+    if int(refine_evals) < 0:
+        raise ValueError(f"refine_evals = {refine_evals}: must be 0 or more")
+    if window is not None and not (math.isfinite(float(window)) and float(window) > 0):
+        raise ValueError(f"window = {window} s: must be a positive number of seconds")
+    if scheduler is None and client is None and int(workers) < 1:
+        raise ValueError(f"workers = {workers}: must be at least 1")
     if shrink and not uncertainty:
         raise ValueError("shrink needs uncertainty: the roughness of the CoRs at the optimum decides the window")
     if staged and grown:
         raise ValueError("choose one pipeline: staged or grown, not both")
+    out.mkdir(parents=True, exist_ok=True)
     folders = find_measurements(data_dir)
     if not folders:
         raise FileNotFoundError(f"{data_dir} holds no measurement (no meta.json in it or below)")

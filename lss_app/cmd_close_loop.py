@@ -75,7 +75,8 @@ def run(args) -> int:
     from .close_loop_report import write_report
 
     for name, v in (("--base-evals", args.base_evals), ("--max-evals", args.max_evals), ("--rounds", args.rounds),
-                    ("--fit-evals", args.fit_evals), ("--candidates", args.candidates)):
+                    ("--fit-evals", args.fit_evals), ("--candidates", args.candidates),
+                    ("--workers", args.workers)):
         if v < 1:
             raise ValueError(f"{name} {v}: must be at least 1")
     for name, v in (("--refine-evals", args.refine_evals), ("--base-refine-evals", args.base_refine_evals),

@@ -81,6 +81,8 @@ def run(args) -> int:
         args.max_evals = GROWN_EVALS if args.grown else MAX_EVALS
     if args.max_evals < 1:
         raise ValueError(f"--max-evals {args.max_evals}: must be at least 1")
+    if args.workers < 1:
+        raise ValueError(f"--workers {args.workers}: must be at least 1")
     if args.refine_evals < 0:
         raise ValueError(f"--refine-evals {args.refine_evals}: must be 0 or more")
     if args.start not in (None, "complex") and not (args.grown and args.with_records):
