@@ -69,6 +69,9 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     at the chosen window lies RETRY_Z sd above the declared noise
     (growing.records_off), the whole identification again with the next
     seed, at most `restarts` times; the better one goes on (`_better`).
+    At the chosen window an identifiable CoR found near its box edge is
+    refined again from the edge, kept where f ends lower
+    (identification.edge_probe; with `uncertainty` and `refine_evals`).
     `workers` and `presolve` are accepted for the common signature and not
     used: the first window's complex is short."""
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
@@ -210,9 +213,30 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     res = IdentificationResult(problem, np.asarray(x0, float), f0, _safe_H(problem, x0), np.asarray(x, float), f,
                                _safe_H(problem, x), nfev, nfev, 0, message, np.array([f0, f]), time.time() - t0,
                                refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
-    if not shrink:
+    if shrink:
+        res = _shrunk(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
+    return _from_edges(res, int(refine_evals), journal)
+
+
+def _from_edges(res, refine_evals, journal):
+    """`res` after the edge probes at its own window (identification.edge_probe)."""
+    from .edge_probe import edge_probes
+    from .identify import _safe_H
+    q = res.problem
+    jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{float(q.times[-1]):g}.jsonl")
+    x, f, ivs, probes = edge_probes(q, res.x, float(res.f), res.intervals, refine_evals, jr)
+    if not probes:
         return res
-    return _shrunk(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
+    extra = sum(p["nfev"] for p in probes)
+    kept = [p for p in probes if p["kept"]]
+    message = res.message + "; from the box edge: " + ", ".join(
+        f"{p['name'].split('.')[-1]} {p['from']:.3g} -> {p['edge']:g}: f = {p['f']:.6g}" for p in probes) \
+        + (f" ({kept[0]['name'].split('.')[-1]} kept, at {kept[0]['to']:.3g})" if kept else " (none lower)")
+    if not kept:
+        return dataclasses.replace(res, nfev=res.nfev + extra, evaluated=res.evaluated + extra, message=message)
+    return dataclasses.replace(res, x=np.asarray(x, float), f=float(f), H=_safe_H(q, x), intervals=ivs,
+                               nfev=res.nfev + extra, evaluated=res.evaluated + extra, message=message,
+                               history_f=np.append(res.history_f, f))
 
 
 def _shrunk(problem, res, trail, ladder, refine_evals, journal, t0):
