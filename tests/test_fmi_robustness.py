@@ -32,9 +32,17 @@ N_VARS = len(model_description().modelVariables)
 INT_MIN, INT_MAX = -2**31, 2**31 - 1
 
 
+RAN: set = set()   # this process's tests of the module (make test spreads them over two workers)
+
+
 @pytest.fixture(scope="module", autouse=True)
 def _built(fmu_file):
     return fmu_file
+
+
+@pytest.fixture(autouse=True)
+def _ran(request):
+    RAN.add(request.node.nodeid)
 
 
 def record(category: str, s: Slave | None, status, n_before: int | None = None, want=None,
@@ -656,9 +664,16 @@ def test_random_layout_files_through_the_fmu(layout_slave, text):
 
 # --- the tally -----------------------------------------------------------------------------------
 
-def test_zz_tally():
-    """Print and store how every bad input ended (run last in this module)."""
-    assert TALLY, "run the whole module to get the tally"
+def test_zz_tally(request):
+    """Print and store how every bad input ended (run last in this module).
+    Under pytest-xdist's work stealing part of the module may run in the
+    other process: the count of more than 1000 bad inputs is asked of a
+    whole module; a part is stored apart (robustness_tally.partial.json)."""
+    mine = [i for i in request.session.items if i.path == request.node.path and i.nodeid != request.node.nodeid]
+    whole = all(i.nodeid in RAN for i in mine)
+    if not TALLY:
+        assert not whole, "no bad input tallied although the whole module ran here"
+        pytest.skip("every test of the module ran in another process: no tally here")
     rows, total, legal = [], 0, 0
     for cat in sorted(TALLY):
         for outcome, k in sorted(TALLY[cat].items()):
@@ -667,9 +682,9 @@ def test_zz_tally():
                 legal += k
             else:
                 total += k
-    write_json_atomic(build.BUILD / "robustness_tally.json",
-                      {"bad_inputs": total, "legal_edge_cases": legal, "rows": rows})
+    write_json_atomic(build.BUILD / ("robustness_tally.json" if whole else "robustness_tally.partial.json"),
+                      {"bad_inputs": total, "legal_edge_cases": legal, "rows": rows, "whole_module": whole})
     print(f"\n{total} bad inputs (and {legal} legal edge cases) through the FMI API:")
     for r in rows:
         print(f"  {r['count']:6d}  {r['category']}: {r['outcome']}")
-    assert total > 1000
+    assert total > 1000 if whole else rows
