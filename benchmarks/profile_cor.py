@@ -59,12 +59,12 @@ def records_of(result: dict) -> list:
     return folders
 
 
-def problem_of(result: dict, free=None, x0=None):
+def problem_of(result: dict, tare: bool, objective: str):
+    """The row's problem at its chosen window (the joint one and its records)."""
     window = float(result["window_s"])
-    parts = [from_measurement(load_measurement(f), result["model"], window=window, tare=True,
-                              objective="likelihood") for f in records_of(result)]
-    p = parts[0] if len(parts) == 1 else JointProblem(parts, free=free, x0=x0)
-    return p, parts
+    parts = [from_measurement(load_measurement(f), result["model"], window=window, tare=tare,
+                              objective=objective) for f in records_of(result)]
+    return (parts[0] if len(parts) == 1 else JointProblem(parts)), parts
 
 
 def ratio_stat(problem, sim: np.ndarray, w: np.ndarray, r0sq: np.ndarray) -> float:
@@ -93,6 +93,9 @@ def main(argv=None) -> int:
     ap.add_argument("--f-rtol", type=float, default=1e-6,
                     help="a refit stops when a step gains less than this share of f (the pipeline's 1e-4 is "
                          "about one unit of L on a record at the noise: too coarse for a profile)")
+    ap.add_argument("--objective", default="likelihood", choices=("likelihood", "pointwise"),
+                    help="the row's objective (bench_recovery --objective)")
+    ap.add_argument("--no-tare", action="store_true", help="the row was computed with bench_recovery --no-tare")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--figure", type=Path)
     args = ap.parse_args(argv)
@@ -103,7 +106,7 @@ def main(argv=None) -> int:
     if name is None:
         ap.error(f"{args.variable}: not a free variable of {args.result} ({', '.join(result['free'])})")
     c0, t0 = time.process_time(), time.time()
-    p, parts = problem_of(result)
+    p, parts = problem_of(result, not args.no_tare, args.objective)
     x_hat = np.array([result["x"][n] for n in p.free])
     sim0 = p.simulate(x_hat)
     r0 = tared(p.samples - sim0, p.tare)
@@ -111,6 +114,11 @@ def main(argv=None) -> int:
     w = (_effective_samples(r0) / r0.shape[0]) / sigma2
     r0sq = np.sum(r0 ** 2, axis=0)
     f_hat = float(p(x_hat))
+    if not np.isclose(f_hat, result["f"], rtol=1e-6):
+        for q in parts:
+            q.sim.close()
+        ap.error(f"{args.result}: f = {f_hat:.8g} at its point here, {result['f']:.8g} stored: the row was computed "
+                 f"with another objective, tare or code (--objective, --no-tare)")
     lo, hi = result["bounds"][name]
     grid = np.union1d(np.linspace(lo, hi, args.points), [result["x"][name]])
     k0 = int(np.argmin(np.abs(grid - result["x"][name])))
