@@ -84,6 +84,14 @@ def crossing(g: np.ndarray, L: np.ndarray, k0: int, step: int) -> float:
     return float(g[k])
 
 
+def interval_of(g: np.ndarray, L: np.ndarray) -> tuple:
+    """The 95 % profile interval: L measured from the profile's own minimum
+    (the estimate need not be it: a refinement stops a little short)."""
+    kmin = int(np.argmin(L))
+    Lm = L - L[kmin]
+    return crossing(g, Lm, kmin, -1), crossing(g, Lm, kmin, +1)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("result", type=Path, help="a bench_recovery row (mNN.json)")
@@ -124,32 +132,36 @@ def main(argv=None) -> int:
     k0 = int(np.argmin(np.abs(grid - result["x"][name])))
     others = [n for n in p.free if n != name]
     base = [n for n in others if "@" not in n]
-    rows = {k0: {"value": float(grid[k0]), "f": f_hat, "L": 0.0, "nfev": 1, "x": result["x"]}}
+
+    def refit(value: float, start: dict) -> dict:
+        """The others refitted with the variable held at `value`, from `start`."""
+        x0 = {**start, name: float(value)}
+        sub = JointProblem(parts, free=base, x0=x0) if isinstance(p, JointProblem) \
+            else dataclasses.replace(p, free=tuple(base), x0=x0)
+        ref = refine(sub, np.array([x0[n] for n in sub.free]), max_evals=args.evals, rel_step=REFINE_STEP,
+                     f_rtol=args.f_rtol, central=True)
+        full = {**sub.values(ref.x), name: float(value)}
+        xf = np.array([full[n] for n in p.free])
+        sim = ref.sim if ref.sim is not None else p.simulate(xf)
+        row = {"value": float(value), "f": float(p(xf)), "L": ratio_stat(p, sim, w, r0sq), "nfev": int(ref.nfev),
+               "x": full}
+        print(f"{args.variable} = {value:.4f}: f = {row['f']:.5g}, L = {row['L']:.4g} ({ref.nfev} simulations)",
+              file=sys.stderr)
+        return row
+
+    # the estimate refitted too: a refinement that stopped short leaves it above its own profile
+    rows = {k0: refit(grid[k0], dict(result["x"]))}
     for step in (-1, 1):   # outwards from the estimate, each point from its neighbour's fit
-        start = dict(result["x"])
-        k = k0 + step
-        while 0 <= k < len(grid):
-            x0 = {**start, name: float(grid[k])}
-            sub = JointProblem(parts, free=base, x0=x0) if isinstance(p, JointProblem) \
-                else dataclasses.replace(p, free=tuple(base), x0=x0)
-            xs = np.array([x0[n] for n in sub.free])
-            ref = refine(sub, xs, max_evals=args.evals, rel_step=REFINE_STEP, f_rtol=args.f_rtol, central=True)
-            fit = sub.values(ref.x)
-            full = {**fit, name: float(grid[k])}
-            sim = ref.sim if ref.sim is not None else p.simulate(np.array([full[n] for n in p.free]))
-            L = ratio_stat(p, sim, w, r0sq)
-            rows[k] = {"value": float(grid[k]), "f": float(p(np.array([full[n] for n in p.free]))), "L": L,
-                       "nfev": int(ref.nfev), "x": full}
-            print(f"{args.variable} = {grid[k]:.4f}: f = {rows[k]['f']:.5g}, L = {L:.4g} ({ref.nfev} simulations)",
-                  file=sys.stderr)
-            start = full
-            k += step
+        start = rows[k0]["x"]
+        for k in range(k0 + step, -1 if step < 0 else len(grid), step):
+            rows[k] = refit(grid[k], start)
+            start = rows[k]["x"]
     for q in parts:
         q.sim.close()
     g = np.array([rows[k]["value"] for k in sorted(rows)])
     L = np.array([rows[k]["L"] for k in sorted(rows)])
     kmin = int(np.argmin(L))
-    lower, upper = crossing(g, L, kmin, -1), crossing(g, L, kmin, +1)
+    lower, upper = interval_of(g, L)
     truth = load_truth(records_of(result)[0])["cor"].get(args.variable) if args.variable.startswith("e_") else None
     iv = (result.get("interval") or {}).get(args.variable) or {}
     out = {"result": str(args.result), "measurement": result["measurement"], "variable": args.variable,
@@ -181,12 +193,13 @@ def plot(out: dict, path: Path) -> None:
         g = np.linspace(min(out["grid"]), max(out["grid"]), 200)
         ax.plot(g, ((g - out["estimate"]) / iv["sd"]) ** 2, "--", color="C1",
                 label=f"Jacobian: ((x - est) / sd)^2, sd {iv['sd']:.3g}")
-    ax.axhline(CHI2_95, color="0.5", lw=0.8, label="95 % (chi^2, 1 dof)")
+    ax.axhline(min(out["L"]) + CHI2_95, color="0.5", lw=0.8, label="95 %: profile minimum + chi^2(1)")
     if out["truth"] is not None:
         ax.axvline(out["truth"], color="C2", lw=1.2, label=f"truth {out['truth']:.3f}")
     pi = out["profile_interval"]
     ax.axvspan(pi["lower"], pi["upper"], color="C0", alpha=0.12, label="profile 95 % interval")
-    ax.set_ylim(-1.0, 4 * CHI2_95)   # the interval's neighbourhood; far points run off the top
+    lo = min(min(out["L"]), 0.0) - 1.0
+    ax.set_ylim(lo, lo + 1.0 + 4 * CHI2_95)   # the interval's neighbourhood; far points run off the top
     ax.set_xlabel(out["variable"])
     ax.set_ylabel("likelihood ratio L")
     ax.set_title(f"{out['measurement']}, {out['window_s']:g} s")

@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
-from profile_cor import CHI2_95, crossing, main, ratio_stat  # noqa: E402
+from profile_cor import CHI2_95, crossing, interval_of, main, ratio_stat  # noqa: E402
 
 
 def test_a_parabola_crosses_where_the_normal_interval_ends():
@@ -28,6 +28,16 @@ def test_a_flat_side_runs_to_the_box_edge():
     L = np.array([0.5, 0.3, 0.2, 0.0, 1.0, 5.0, 9.0, 20.0])
     assert crossing(g, L, 3, -1) == 0.2
     assert 0.6 < crossing(g, L, 3, +1) < 0.7
+
+
+def test_the_interval_is_measured_from_the_profiles_own_minimum():
+    # the estimate (L = 0) stopped short of the bottom, which lies 19 lower at 0.6
+    sd = 0.1
+    g = np.linspace(0.2, 0.9, 71)
+    L = ((g - 0.6) / sd) ** 2 - 19.0
+    lower, upper = interval_of(g, L)
+    assert lower == pytest.approx(0.6 - np.sqrt(CHI2_95) * sd, abs=1e-3)
+    assert upper == pytest.approx(0.6 + np.sqrt(CHI2_95) * sd, abs=1e-3)
 
 
 def test_the_ratio_is_the_weighted_change_of_the_squared_residual():
