@@ -13,7 +13,8 @@ count from the residual at the estimate),
     L(g) = sum_j w_j sum_i (r_ij(g)^2 - r_ij(estimate)^2),
 
 so that a linear problem gives L = (g - estimate)^2 / sd^2; the 95 %
-profile interval is where L <= 3.84 (chi^2, one degree of freedom). Where
+profile interval is where L lies within 3.84 of its minimum (chi^2, one degree
+of freedom; the estimate is refitted too and need not be that minimum). Where
 the Jacobian interval says a CoR is determined, the profile shows whether
 it is, over the whole box and not only at the estimate.
 
