@@ -41,7 +41,7 @@ from identification.identify import REFINE_STEP  # noqa: E402
 from identification.joint import JointProblem  # noqa: E402
 from identification.problem import from_measurement, tared  # noqa: E402
 from identification.refine import refine  # noqa: E402
-from identification.uncertainty import _effective_samples  # noqa: E402
+from identification.uncertainty import information_weights  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
@@ -119,8 +119,7 @@ def main(argv=None) -> int:
     x_hat = np.array([result["x"][n] for n in p.free])
     sim0 = p.simulate(x_hat)
     r0 = tared(p.samples - sim0, p.tare)
-    sigma2 = np.maximum(np.mean(r0 ** 2, axis=0), 1e-30)
-    w = (_effective_samples(r0) / r0.shape[0]) / sigma2
+    w = information_weights(r0)
     r0sq = np.sum(r0 ** 2, axis=0)
     f_hat = float(p(x_hat))
     if not np.isclose(f_hat, result["f"], rtol=1e-6):

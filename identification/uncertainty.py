@@ -86,6 +86,13 @@ def _effective_samples(r: np.ndarray) -> np.ndarray:
     return n * (1 - rho) / (1 + rho)
 
 
+def information_weights(r: np.ndarray) -> np.ndarray:
+    """Per channel, what a squared residual sample is worth in the interval's
+    metric: (n_eff / n) / sigma^2, sigma^2 and n_eff from the residual r."""
+    sigma2 = np.maximum(np.mean(r ** 2, axis=0), 1e-30)
+    return (_effective_samples(r) / r.shape[0]) / sigma2
+
+
 def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
              rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
              steps: Optional[np.ndarray] = None) -> tuple:
@@ -157,8 +164,7 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
     if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
         demean = np.abs((problem.samples - sim0).mean(axis=0)) <= problem.tare
         J[:, demean, :] -= J[:, demean, :].mean(axis=0)
-    n_eff = _effective_samples(r)
-    w = (n_eff / r.shape[0]) / sigma2                          # per channel
+    w = information_weights(r)                                 # per channel
     F = np.einsum("tjk,j,tjl->kl", J, w, J)
     lo, hi = np.array(problem.bounds_array, float).T
     # the columns differ by orders of magnitude (a pretension in metres, a gain in N s/m): invert the
