@@ -19,13 +19,21 @@ Every case is written atomically to benchmarks/results/close_loop_rates/
 <case>.json when done: an interrupted run resumes where it stopped. One
 process, one core (the machine is shared).
 
+Each case carries the stamp of the code it ran on (`code_stamp`: the loop's
+sources, the FMU's C and the benchmark's case making), so the report can say
+how many of its rows are of the current code; `run --stale` reruns the cases
+stored under another stamp (a rerun of the whole set can span several
+sessions as long as that code does not change).
+
     .venv/bin/python benchmarks/bench_close_loop_rates.py run [--part clean|detect|ooc|all] [--records 10]
-        [--families mass,track_bump] [--amplitudes-index 0,1] [--ids ID,ID] [--limit N]
+        [--families mass,track_bump] [--amplitudes-index 0,1] [--ids ID,ID] [--limit N] [--stale]
     .venv/bin/python benchmarks/bench_close_loop_rates.py report [--figure docs/figures/close_loop_rates.png]
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
+import inspect
 import json
 import logging
 import math
@@ -231,6 +239,31 @@ def run_case(case: dict, budget: dict = BUDGET) -> dict:
             "wall_s": time.time() - t0, "cpu_s": time.process_time() - c0, "budget": budget}
 
 
+def code_stamp() -> str:
+    """A short hash of what decides a case's outcome: the loop's and the model's sources (identification,
+    lss_fmu, fmu_src) and this file's case making and budgets; not the report, not the tests."""
+    h = hashlib.sha256()
+    for folder in ("identification", "lss_fmu", "fmu_src"):
+        for path in sorted((ROOT / folder).rglob("*")):
+            if path.is_file() and "__pycache__" not in path.parts and path.suffix != ".pyc":
+                h.update(path.relative_to(ROOT).as_posix().encode())
+                h.update(path.read_bytes())
+    for fn in (_rng, cases, _moving_channels, synthetic_problem, rig_problem, run_case):
+        h.update(inspect.getsource(fn).encode())
+    h.update(repr((BUDGET, CARTS, FAMILIES, OOC, RIG_CLEAN, SYN_CLEAN)).encode())
+    return h.hexdigest()[:12]
+
+
+def _commit() -> str:
+    import subprocess
+    try:
+        out = subprocess.run(["git", "-C", str(ROOT), "describe", "--always", "--dirty"], capture_output=True,
+                             text=True, timeout=10)
+        return out.stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
 def parse_budget(text: str) -> dict:
     """BUDGET with 'key=int,...' on top (a comparison of budgets; keys as close_loop's)."""
     out = dict(BUDGET)
@@ -255,16 +288,20 @@ def cmd_run(args) -> int:
         todo = [by_id[i] for i in args.ids.split(",") if i in by_id]
     budget, results = parse_budget(args.budget), Path(args.results)
     results.mkdir(parents=True, exist_ok=True)
+    stamp, commit = code_stamp(), _commit()
+    print(f"code stamp {stamp} (commit {commit})", flush=True)
     done = 0
     for case in todo:
         path = results / f"{case['id']}.json"
-        if path.is_file():
-            continue
+        if path.is_file():   # done: kept unless --stale and stored under another stamp
+            if not args.stale or json.loads(path.read_text()).get("code_stamp") == stamp:
+                continue
         try:
             res = run_case(case, budget)
         except Exception as exc:   # a case that cannot run is recorded, the benchmark goes on
             import traceback
             res = {**case, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc()}
+        res.update(code_stamp=stamp, commit=commit)
         write_json_atomic(path, res)
         done += 1
         print(f"{case['id']}: {res.get('outcome', res.get('error'))} found {res.get('found')} "
@@ -341,8 +378,11 @@ def figure(summary: dict, path: Path) -> None:
     for ax in axes.ravel()[len(fams):]:
         ax.axis("off")
     c = summary["clean"]
+    code = summary.get("code")
     fig.suptitle(f"Closed loop: detection rate against amplitude (release transient, layout 7); clean records: "
-                 f"{len(c['false_confirmations'])} false confirmation(s) in {c['records']}", fontsize=10)
+                 f"{len(c['false_confirmations'])} false confirmation(s) in {c['records']}"
+                 + (f"\n{code['of_current']} of {code['rows']} rows on code {code['current']}" if code else ""),
+                 fontsize=10)
     fig.tight_layout()
     from lss_app.figures.save import save_figure
     save_figure(fig, path)
@@ -362,8 +402,17 @@ def table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def code_of(results: list, stamp: str) -> dict:
+    """Which rows are of the code `stamp` (the current one when reported), and which are not."""
+    other = sorted(r["id"] for r in results if r.get("code_stamp") != stamp)
+    return {"current": stamp, "of_current": len(results) - len(other), "rows": len(results), "other": other,
+            "commits": sorted({r["commit"] for r in results if r.get("code_stamp") == stamp and r.get("commit")})}
+
+
 def cmd_report(args) -> int:
-    s = summarise(load_results(args.results))
+    results = load_results(args.results)
+    s = summarise(results)
+    s["code"] = code_of(results, code_stamp())
     stored = Path(args.results).resolve() == RESULTS.resolve()
     if stored:   # the stored set's summary and figure; another folder only prints (or --figure)
         write_json_atomic(SUMMARY, s)
@@ -371,6 +420,10 @@ def cmd_report(args) -> int:
     if fig:
         figure(s, Path(fig))
     print(json.dumps({k: s[k] for k in ("clean", "out_of_catalogue", "errors", "cpu_s")}, indent=1))
+    c = s["code"]
+    print(f"{c['of_current']} of {c['rows']} rows of the current code (stamp {c['current']}, commits "
+          f"{', '.join(c['commits']) or '-'})" + (f"; the other {len(c['other'])} are from earlier code" if c["other"]
+                                                  else ""))
     print(table(s))
     return 0
 
@@ -389,6 +442,7 @@ def main(argv=None) -> int:
     r.add_argument("--budget", default="", help="KEY=N,... on top of BUDGET (e.g. base_evals=200); with --results "
                                                 "elsewhere, so the stored set stays one budget's")
     r.add_argument("--results", default=str(RESULTS), help="folder of the case files")
+    r.add_argument("--stale", action="store_true", help="rerun the cases stored under another code stamp")
     r.set_defaults(run=cmd_run)
     p = sub.add_parser("report")
     p.add_argument("--figure", default=None, help="default: docs/figures/close_loop_rates.png for the stored set")
