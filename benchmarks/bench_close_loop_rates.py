@@ -410,9 +410,11 @@ def code_of(results: list, stamp: str) -> dict:
 
 
 def cmd_report(args) -> int:
-    results = load_results(args.results)
+    results, stamp = load_results(args.results), code_stamp()
+    if args.current_only:   # the rates of the current code alone (a rerun under way: its rows so far)
+        results = [r for r in results if r.get("code_stamp") == stamp]
     s = summarise(results)
-    s["code"] = code_of(results, code_stamp())
+    s["code"] = code_of(results, stamp)
     stored = Path(args.results).resolve() == RESULTS.resolve()
     if stored:   # the stored set's summary and figure; another folder only prints (or --figure)
         write_json_atomic(SUMMARY, s)
@@ -447,6 +449,7 @@ def main(argv=None) -> int:
     p = sub.add_parser("report")
     p.add_argument("--figure", default=None, help="default: docs/figures/close_loop_rates.png for the stored set")
     p.add_argument("--results", default=str(RESULTS), help="folder of the case files")
+    p.add_argument("--current-only", action="store_true", help="count only the rows of the current code stamp")
     p.set_defaults(run=cmd_report)
     args = ap.parse_args(argv)
     return args.run(args)

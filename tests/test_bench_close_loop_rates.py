@@ -69,3 +69,12 @@ def test_report_names_the_rows_of_other_code(tmp_path, capsys):
     bench.main(["report", "--results", str(tmp_path)])
     out = capsys.readouterr().out
     assert "1 of 2 rows of the current code" in out and "the other 1 are from earlier code" in out
+
+
+def test_report_current_only_counts_the_current_rows(tmp_path, capsys):
+    _store(tmp_path, "clean_syn_00", "0123456789ab")
+    _store(tmp_path, "clean_syn_01", bench.code_stamp())
+    _store(tmp_path, "clean_syn_02", bench.code_stamp())
+    bench.main(["report", "--results", str(tmp_path), "--current-only"])
+    out = capsys.readouterr().out
+    assert "2 of 2 rows of the current code" in out and '"records": 2' in out
