@@ -381,7 +381,8 @@ def figure(summary: dict, path: Path) -> None:
     code = summary.get("code")
     fig.suptitle(f"Closed loop: detection rate against amplitude (release transient, layout 7); clean records: "
                  f"{len(c['false_confirmations'])} false confirmation(s) in {c['records']}"
-                 + (f"\n{code['of_current']} of {code['rows']} rows on code {code['current']}" if code else ""),
+                 + (f"\n{code['of_current']} of {code['rows']} rows on code {code['current']}"
+                    + (" (only they counted)" if code.get("counted") == "current only" else "") if code else ""),
                  fontsize=10)
     fig.tight_layout()
     from lss_app.figures.save import save_figure
@@ -411,10 +412,11 @@ def code_of(results: list, stamp: str) -> dict:
 
 def cmd_report(args) -> int:
     results, stamp = load_results(args.results), code_stamp()
+    code = {**code_of(results, stamp), "counted": "current only" if args.current_only else "all rows"}
     if args.current_only:   # the rates of the current code alone (a rerun under way: its rows so far)
         results = [r for r in results if r.get("code_stamp") == stamp]
     s = summarise(results)
-    s["code"] = code_of(results, stamp)
+    s["code"] = code
     stored = Path(args.results).resolve() == RESULTS.resolve()
     if stored:   # the stored set's summary and figure; another folder only prints (or --figure)
         write_json_atomic(SUMMARY, s)
@@ -424,8 +426,9 @@ def cmd_report(args) -> int:
     print(json.dumps({k: s[k] for k in ("clean", "out_of_catalogue", "errors", "cpu_s")}, indent=1))
     c = s["code"]
     print(f"{c['of_current']} of {c['rows']} rows of the current code (stamp {c['current']}, commits "
-          f"{', '.join(c['commits']) or '-'})" + (f"; the other {len(c['other'])} are from earlier code" if c["other"]
-                                                  else ""))
+          f"{', '.join(c['commits']) or '-'})" + (f"; the other {len(c['other'])} are from earlier code"
+                                                  + (" and left out of the counts" if args.current_only else "")
+                                                  if c["other"] else ""))
     print(table(s))
     return 0
 
