@@ -358,6 +358,7 @@ def figure(summary: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
     fams = list(summary["detection"])
     ncol = 3
     fig, axes = plt.subplots(math.ceil(len(fams) / ncol), ncol, figsize=(12, 3.0 * math.ceil(len(fams) / ncol)))
@@ -371,7 +372,10 @@ def figure(summary: dict, path: Path) -> None:
         ax.axhline(90, color="tab:red", ls="--", lw=1)
         ax.set_ylim(-5, 105)
         ax.set_title(fam, fontsize=10)
-        ax.set_xlabel(d["unit"], fontsize=8)
+        # ticks at the amplitudes run: the log axis' minor labels overlap on short ranges
+        ax.set_xticks(xs, [f"{x:g}" for x in xs], fontsize=8)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xlabel("fraction" if d["unit"] == "1" else d["unit"], fontsize=8)
         ax.set_ylabel("found, %", fontsize=8)
         ax.grid(alpha=0.3, which="both")
     axes.ravel()[0].legend(fontsize=7)
