@@ -13,6 +13,11 @@ track length to exactly carts x 1.25 m, so the chain of Table 2 fits the loop
 without a gap. Since element frames do not depend on straight lengths, the end
 point is linear in the unknowns: one small linear solve closes each loop to
 rounding error (~1e-12 m), and the solved lengths are written in full.
+
+The solve's last digits depend on the machine (the linear-algebra kernel numpy
+picks for the CPU), so a shipped file is current when it reads as the design's
+solution to within `NUM_TOL`, far above rounding and far below anything a cart
+feels, not when its text is the same to the last digit.
 """
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ from .layout_format import (CURVE, DEG, SPIRAL, STRAIGHT, VCURVE, ElementSpec, L
 from .track_geometry import PITCH, Track
 
 LAYOUT_DIR = Path(__file__).resolve().parent.parent / "fmu_src" / "resources" / "layouts"
+NUM_TOL = 1e-9   # m (or deg): two renderings of one design agree within this in every number
 
 
 @dataclass
@@ -205,8 +211,38 @@ def render(d: Design, spec: LayoutSpec) -> str:
     return "\n".join(head + body) + "\n"
 
 
+def _tokens(text: str) -> list:
+    return [line.split() for line in text.splitlines()]
+
+
+def _number(tok: str) -> Optional[float]:
+    try:
+        return float(tok)
+    except ValueError:
+        return None
+
+
+def same_layout_text(a: str, b: str, tol: float = NUM_TOL) -> bool:
+    """Whether two layout texts say the same: the same lines and words, every
+    number within `tol` of its counterpart (the words and comments exactly)."""
+    ta, tb = _tokens(a), _tokens(b)
+    if [len(x) for x in ta] != [len(x) for x in tb]:
+        return False
+    for x, y in zip(ta, tb):
+        for u, v in zip(x, y):
+            nu, nv = _number(u), _number(v)
+            if nu is None or nv is None:
+                if u != v:
+                    return False
+            elif not abs(nu - nv) <= tol:
+                return False
+    return True
+
+
 def generate(check: bool = False) -> list:
-    """Write (or with check=True compare) every design's file; returns the stale names."""
+    """Write (or with check=True compare) every design's file; returns the stale
+    names: those missing or reading otherwise than the design (`same_layout_text`).
+    A current file is left as it is, so its digits do not churn with the machine."""
     stale = []
     LAYOUT_DIR.mkdir(parents=True, exist_ok=True)
     for d in DESIGNS:
@@ -215,7 +251,7 @@ def generate(check: bool = False) -> list:
         if back.closure_error > 1e-9 or abs(back.length - d.carts * PITCH) > 1e-9:
             raise RuntimeError(f"{d.name}: the written file does not close to 1e-9 m")
         path = LAYOUT_DIR / f"{d.name}.layout"
-        if not path.exists() or path.read_text() != text:
+        if not path.exists() or not same_layout_text(path.read_text(), text):
             stale.append(d.name)
             if not check:
                 path.write_text(text)

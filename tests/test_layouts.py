@@ -81,6 +81,22 @@ def test_files_are_what_the_designs_give():
     assert layout_design.generate(check=True) == []
 
 
+def test_layout_texts_are_compared_by_their_numbers():
+    """The solved straights' last digits follow the machine's linear algebra: a
+    rendering that differs below NUM_TOL is the same layout, one that differs
+    above it, or in a word, is not."""
+    d = next(d for d in layout_design.DESIGNS if d.name == "layout1")
+    text = layout_design.render(d, layout_design.solve(d))
+    solved = next(line for line in text.splitlines() if line.startswith("straight ") and "." in line)
+    value = float(solved.split()[1])
+    same = layout_design.same_layout_text
+    assert same(text, text.replace(solved, f"straight {value * (1 + 4e-16)!r}"))
+    assert same(text, text.replace(solved, f"straight {value + 0.5 * layout_design.NUM_TOL!r}"))
+    assert not same(text, text.replace(solved, f"straight {value + 1e-6!r}"))
+    assert not same(text, text.replace("curve 3 90 left", "curve 3 90 right", 1))
+    assert not same(text, text + "straight 1\n")
+
+
 def test_resolve_layout(tmp_path):
     assert set(TABLE2) | {"demo", "oval"} <= set(builtin_layouts())
     assert builtin_layouts()[:7] == [f"layout{i}" for i in range(1, 8)]
