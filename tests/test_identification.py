@@ -48,9 +48,9 @@ def test_recovery_from_the_release_transient(release_problem):
     err = dict(zip(CORS, res.x - truth))
     for k in ("contact.e_JA", "contact.e_SW", "contact.e_RW"):
         assert abs(err[k]) <= 0.03, (k, err)
-    assert res.restarts >= 1 and res.nfev <= 1000
+    assert res.nfev <= 1000
     # the method as published stops on its parameter spread at ~20x the floor (726
-    # evaluations with this seed); the restart takes it to within 2x
+    # evaluations with one seed); the restarts take it to within 2x
     assert res.f < 2.5 * f_truth, (res.f, f_truth)
 
 

@@ -54,7 +54,7 @@ def test_a_play_stopped_on_the_rung_below_is_walked_up_to_it(fmu_file):
     assert abs(xm[-1] / 20e-6 - 1.0) < 0.05, xm[-1]
     lo, hi = moved.bounds[GAP]
     assert lo <= xm[-1] <= hi and lo < ext.bounds[GAP][1] < hi, (lo, hi)   # the rung beyond the old edge
-    assert calls[0][0] == 1 and len(calls) == len(walked)
+    assert len(calls) == len(walked)   # one fit per rung walked
     assert np.isclose(weighted_residual(moved, moved.simulate(xm), w)[1], S_m)
 
 
