@@ -63,6 +63,9 @@ class IdentificationResult:
     intervals: Optional[list] = None  # identification.uncertainty.Interval per free variable
     windows: Optional[list] = None   # identification.windowing: every window tried, its f and troubles
     grown: Optional[list] = None     # identification.identify_grown: each growing window's S per sample
+    method: Optional[str] = None     # identification.pipeline: "grown" or "statistics"
+    settings: Optional[dict] = None  # identification.pipeline: the settings used (Settings.to_dict)
+    records: Optional[list] = None   # identification.pipeline: the record folders fitted
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -85,6 +88,7 @@ class IdentificationResult:
             "grown": self.grown,
             "interval": None if self.intervals is None else {
                 symbol(iv.name): iv.to_dict() for iv in self.intervals},
+            "method": self.method, "settings": self.settings, "records": self.records,
         }
 
 

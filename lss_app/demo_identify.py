@@ -1,7 +1,7 @@
 """The stages of `make demo` after the plain simulation: a start-stop
 measurement of the built-in layout 7 by the virtual transducer cart, the
-identification of the paper's ten design variables (Complex-RF, then
-Levenberg-Marquardt, with an interval for each), the report (identified
+identification of the paper's ten design variables as `lss identify` does it
+by default (identification.pipeline, with an interval for each), the report (identified
 against true values, the paper's figures), and closing the loop on data with
 an undeclared effect (lss_app.demo_close_loop)."""
 from __future__ import annotations
@@ -13,12 +13,6 @@ from lss_fmu.atomic import write_json_atomic
 
 MEASUREMENT = 20        # recovery set: layout 7, Table 3 row 20
 PROTOCOL = "start-stop"  # from standstill, braked 1 s later: the record that carries the CoRs best
-OBJECTIVE = "likelihood"  # each force over the sensor's declared noise (docs/identification.md)
-WINDOW = 2.5            # s of the record used (before the chain could turn chaotic)
-PRESOLVE = 150          # Complex-RF evaluations on the layout-dependent variables first
-BUDGET = 450            # then Complex-RF evaluations on all ten (with up to RESTARTS restarts)
-RESTARTS = 2
-REFINE = 160            # then Levenberg-Marquardt simulations
 
 
 def run_stages(out: Path) -> list[str]:
@@ -27,8 +21,8 @@ def run_stages(out: Path) -> list[str]:
     from lss_fmu.rig import folder_name, load_truth, run_measurement, true_design_values
     from lss_fmu.runner import ChainSimulator
 
-    from identification.identify import identify
-    from identification.problem import from_measurement
+    from identification.pipeline import build_problem, identify_records
+    from identification.settings import Settings
 
     from .figures.identification import forces_overlay, history, nrmsd_bars
 
@@ -41,26 +35,30 @@ def run_stages(out: Path) -> list[str]:
     meas = load_measurement(folder)
     truth = load_truth(folder)
 
-    print(f"[3] identifying the ten design variables: Complex-RF {PRESOLVE} + {BUDGET} evaluations, "
-          f"Levenberg-Marquardt {REFINE}, intervals ...", flush=True)
-    problem = from_measurement(meas, "LW", window=WINDOW, tare=True, objective=OBJECTIVE)
+    settings = Settings()   # what `lss identify REC --model LW` runs
+    print(f"[3] identifying the ten design variables as `lss identify` does by default: the first "
+          f"{settings.window:g} s, the likelihood objective, the complex on the first {settings.first_window:g} s "
+          f"({settings.max_evals} evaluations), Levenberg-Marquardt over growing windows, intervals ...", flush=True)
+    problem = build_problem([meas], "LW", settings)
     work = out / "identify"
     work.mkdir(parents=True, exist_ok=True)
     journal = work / "journal.jsonl"
     for old in work.glob("journal*"):
         old.unlink()  # a demo starts afresh
     t0, c0 = time.time(), time.process_time()
-    res = identify(problem, max_evals=BUDGET, presolve=PRESOLVE, restarts=RESTARTS, refine_evals=REFINE,
-                   uncertainty=True, seed=0, journal=journal, progress=True)
+    res = identify_records([meas], "LW", settings, seed=0, journal=journal, progress=True, problem=problem)
     cpu = time.process_time() - c0
+    problem = res.problem   # the window the result is for
     write_json_atomic(work / "result.json", res.to_dict())
+    true = true_design_values(truth)
+    f_truth = problem([true[k] for k in problem.free])
     initial, optimum = problem.simulate(res.x0), problem.simulate(res.x)
-    forces_overlay(problem.times, problem.samples, initial, optimum, work / "forces", f"{meas.id}, LW")
+    forces_overlay(problem.times, problem.samples, initial, optimum, work / "forces",
+                   f"{meas.id}, LW: f {res.f:.4g}, at the truth {f_truth:.4g}", tare=problem.tare,
+                   noise=problem.noise)
     history(res.history_f, work / "history", f"{meas.id}, LW")
     nrmsd_bars(res.H0, res.H, work / "nrmsd", f"{meas.id}, LW")
 
-    true = true_design_values(truth)
-    f_truth = problem([true[k] for k in problem.free])
     ivs = {iv.name: iv for iv in (res.intervals or [])}
     rows = ["| variable | true | start | identified | 95 % interval |", "|---|---|---|---|---|"]
     for k, x0, x in zip(problem.free, res.x0, res.x):
@@ -76,11 +74,11 @@ def run_stages(out: Path) -> list[str]:
         f"{meas.protocol.step_time:g} s later ({info['n_samples']} samples at 300 Hz), in `data/`; the truth "
         f"is in `data/answers/`, which identification never reads.\n",
         "## Identification\n",
-        f"Contact model LW, the first {WINDOW:g} s of the record, the {OBJECTIVE} objective (each force's "
-        f"RMSD over the sensor's declared noise: about 7 when only the noise is left), the paper's ten "
-        f"design variables free: "
-        f"Complex-RF on the layout-dependent six ({PRESOLVE} evaluations), then on all ten ({BUDGET}), then "
-        f"Levenberg-Marquardt ({REFINE} simulations at most); {time.time() - t0:.0f} s wall, {cpu:.0f} CPU-s. "
+        f"Contact model LW, the method `lss identify` takes by default for a transient record "
+        f"(identification.pipeline; settings in `identify/result.json`): the first "
+        f"{float(problem.times[-1]):.3g} s of the record used, the likelihood objective (each force's RMSD "
+        f"over the sensor's declared noise: about 7 when only the noise is left), the paper's ten design "
+        f"variables free; {res.message}. {time.time() - t0:.0f} s wall, {cpu:.0f} CPU-s. "
         f"f = {res.f0:.4g} at the start, {res.f:.4g} at the optimum, {f_truth:.4g} at the truth "
         f"(what the sensor's noise leaves): {res.f / f_truth:.2f} x the floor.\n",
         "\n".join(rows) + "\n",
@@ -88,7 +86,7 @@ def run_stages(out: Path) -> list[str]:
         "interval spans more than 40 % of its range is reported as not identifiable.\n",
         "![forces](identify/forces.png)\n", "![history](identify/history.png)\n", "![nrmsd](identify/nrmsd.png)\n",
         "One record of this kind determines e_JA, e_SW and e_RW to about +-0.01-0.04 (2 sd) depending on "
-        "the layout, e_JR not at all (docs/identification.md, Cramér-Rao bounds and the recovery tables): "
+        "the layout, e_JR not at all (docs/identification.md, \"What a record can tell\"): "
         "compare the identified CoRs with their intervals and the truth.\n",
     ]
     from .demo_close_loop import run_close_loop_stage

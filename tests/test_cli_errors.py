@@ -42,7 +42,13 @@ def folders(tmp_path_factory):
     layout = root / "layout" / "m01"
     M.write_measurement(layout, make_samples(), make_meta())
     edit_meta(layout, lambda m: m.update(layout="layout42"))
-    return {"root": root, "good": good, "nan": nan, "bound": bound, "layout": layout}
+    other = root / "other" / "m02"   # another sorter: layout 5
+    M.write_measurement(other, make_samples(), make_meta(layout="layout5", wheel_type="A", id="test-02", number=2))
+    for name, text in {"zero": "[identify]\nmax_evals = 0\n", "negative": "[identify]\nrestarts = -1\n",
+                       "unknown": "[identify]\nbudget = 3\n", "table": "[identfy]\nwindow = 2.0\n",
+                       "broken": "[identify\nwindow = 2\n", "free": "[identify]\nfree = [\"e_XY\"]\n"}.items():
+        (root / f"{name}.toml").write_text(text)
+    return {"root": root, "good": good, "nan": nan, "bound": bound, "layout": layout, "other": other}
 
 
 CASES = [
@@ -68,12 +74,22 @@ CASES = [
     ("identify impossible bound", ["identify", "{bound}", "--model", "HW", "--out", "{root}/o"],
      ["meta.json", "design_variables.v_s", "lower"]),
     ("identify unknown layout", ["identify", "{layout}", "--model", "HW", "--out", "{root}/o"], ["layout42"]),
-    ("identify bad budget", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--max-evals", "0"],
-     ["max-evals"]),
-    ("identify negative restarts", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--restarts", "-1"],
-     ["--restarts -1"]),
-    ("identify staged statistics", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--staged",
-                                    "--objective", "statistics"], ["staged", "statistics objective"]),
+    ("identify bad budget", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--settings",
+                             "{root}/zero.toml"], ["zero.toml", "max_evals = 0", "at least 1"]),
+    ("identify negative restarts", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--settings",
+                                    "{root}/negative.toml"], ["negative.toml", "restarts = -1"]),
+    ("identify unknown setting", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--settings",
+                                  "{root}/unknown.toml"], ["unknown.toml", "unknown key 'budget'"]),
+    ("identify unknown settings table", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--settings",
+                                         "{root}/table.toml"], ["table.toml", "[identfy]"]),
+    ("identify settings not toml", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--settings",
+                                    "{root}/broken.toml"], ["broken.toml", "not TOML"]),
+    ("identify settings unknown variable", ["identify", "{good}", "--model", "HW", "--out", "{root}/o",
+                                            "--settings", "{root}/free.toml"], ["free.toml", "e_XY"]),
+    ("identify missing settings", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--settings",
+                                   "{root}/none.toml"], ["none.toml", "cannot read"]),
+    ("identify two sorters", ["identify", "{good}", "{other}", "--model", "HW", "--out", "{root}/o"],
+     ["m02", "layout", "one sorter"]),
     ("campaign negative restarts", ["campaign", "{root}/good", "--models", "HW", "--out", "{root}/c",
                                     "--restarts", "-2"], ["restarts = -2"]),
     ("identify no workers", ["identify", "{good}", "--model", "HW", "--out", "{root}/o", "--workers", "0"],

@@ -106,7 +106,8 @@ def test_failed_simulation_is_a_bad_value_not_a_crash(release_problem, caplog):
 
 
 def test_identify_command_end_to_end(fmu_file, tmp_path):
-    """`lss identify` on a measurement folder: result JSON and the figures."""
+    """`lss identify` on a measurement folder: result JSON (with the settings
+    used) and the figures."""
     from lss_app.cli import main
     from lss_fmu.measurement import write_measurement
     p_times = np.arange(0, 0.5, 1 / 300)
@@ -126,12 +127,17 @@ def test_identify_command_end_to_end(fmu_file, tmp_path):
     df[FORCE_CHANNELS + SPEED_CHANNELS] = df[FORCE_CHANNELS + SPEED_CHANNELS].round(3)
     write_measurement(tmp_path / "m", df, meta)
     out = tmp_path / "out"
-    rc = main(["identify", str(tmp_path / "m"), "--model", "LW", "--out", str(out), "--max-evals", "8",
-               "--free", "e_SW,e_RW", "--window", "0.4", "--no-progress"])
+    settings = tmp_path / "quick.toml"
+    settings.write_text('[identify]\nsteady_evals = 8\nfree = ["e_SW", "e_RW"]\n')
+    rc = main(["identify", str(tmp_path / "m"), "--model", "LW", "--out", str(out), "--settings", str(settings),
+               "--no-progress"])
     assert rc == 0
     res = json.loads((out / "result.json").read_text())
     assert res["model"] == "LW" and res["nfev"] >= 8 and set(res["x"]) == {"contact.e_SW", "contact.e_RW"}
     assert res["f"] <= res["f0"]
+    # a record of steady running: the statistics, and the CoRs said to be out of its reach
+    assert res["method"] == "statistics" and "not identifiable" in res["message"]
+    assert res["settings"]["steady_evals"] == 8 and res["settings"]["free"] == ["e_SW", "e_RW"]
     for fig in ("forces", "history", "nrmsd"):
         assert (out / f"{fig}.png").stat().st_size > 1000
     assert main(["identify", str(tmp_path / "m"), "--model", "XX", "--out", str(out)]) == 2

@@ -92,29 +92,22 @@ def test_two_records_identify_the_cors_closer_than_one(records):
 
 
 def test_lss_identify_takes_further_records(records, tmp_path):
-    """`lss identify FIRST --with SECOND`: one result for both records, the
-    second's trigger point its own variable."""
+    """`lss identify FIRST SECOND`: one result for both records, the second's
+    trigger point its own variable, the settings used written beside it."""
     import json
     import subprocess
     import sys
+    settings = tmp_path / "quick.toml"
+    settings.write_text('[identify]\nwindow = 0.6\nfree = ["e_JA", "e_SW", "s_M"]\nmax_evals = 8\n'
+                        'refine_evals = 0\nrestarts = 0\nshrink = false\nstart = "complex"\n')
     out = tmp_path / "joint"
-    cp = subprocess.run([sys.executable, "-m", "lss_app.cli", "identify", str(records[0].path), "--with",
-                         str(records[1].path), "--model", "LW", "--out", str(out), "--window", str(WINDOW),
-                         "--tare", "--objective", "likelihood", "--free", "e_JA,e_SW,s_M", "--max-evals", "8",
-                         "--refine-evals", "0", "--no-progress"], capture_output=True, text=True, timeout=600)
+    cp = subprocess.run([sys.executable, "-m", "lss_app.cli", "identify", str(records[0].path),
+                         str(records[1].path), "--model", "LW", "--out", str(out), "--settings", str(settings),
+                         "--no-progress"], capture_output=True, text=True, timeout=600)
     assert cp.returncode == 0, cp.stderr
     res = json.loads((out / "result.json").read_text())
     assert res["free"] == ["contact.e_JA", "contact.e_SW", TRIGGER, f"{TRIGGER}@1"]
     assert "s_M@1" in res["values"] and res["measurement"].endswith("(+1 records)")
+    assert res["method"] == "grown" and res["settings"]["max_evals"] == 8 and res["settings"]["window"] == 0.6
+    assert res["settings"]["free"] == ["e_JA", "e_SW", "s_M"] and len(res["records"]) == 2
     assert (out / "forces.png").is_file()
-
-
-def test_lss_identify_refuses_a_joint_start_without_a_joint_fit(records, tmp_path):
-    import subprocess
-    import sys
-    cp = subprocess.run([sys.executable, "-m", "lss_app.cli", "identify", str(records[0].path), "--model", "LW",
-                         "--out", str(tmp_path / "one"), "--grown", "--start", "single", "--no-progress"],
-                        capture_output=True, text=True, timeout=300)
-    assert cp.returncode != 0
-    assert "--start single: where a joint fit starts, needs --grown and --with" in cp.stderr
-    assert not (tmp_path / "one").exists()

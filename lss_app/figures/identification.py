@@ -17,19 +17,41 @@ from .save import save_figure  # noqa: E402
 
 
 def forces_overlay(times, measured, initial, optimum, path: Path, title: str,
-                   labels: tuple = ("initial", "optimum")) -> Path:
+                   labels: tuple = ("initial", "optimum"), tare=None, noise=None) -> Path:
+    """The measured forces and the simulations as the objective compares them:
+    with `tare` (N per channel) each simulation is shifted by the zero error
+    the objective takes out (the mean residual, clipped to the tolerance);
+    with `noise` (the sensor's sigma per channel) a +-2 sigma band about the
+    record, and each channel's RMSD of the last simulation over sigma (about 1
+    where only the noise is left) in its label."""
+    def seen(sim):
+        if sim is None or tare is None:
+            return sim
+        return sim + np.clip((measured - sim).mean(axis=0), -np.asarray(tare), np.asarray(tare))
+
+    initial, optimum = seen(initial), seen(optimum)
+    last = optimum if optimum is not None else initial
     fig, axes = plt.subplots(len(FORCE_CHANNELS), 1, figsize=(11, 13), sharex=True)
     for j, ax in enumerate(axes):
+        if noise is not None:
+            ax.fill_between(times, measured[:, j] - 2 * noise[j], measured[:, j] + 2 * noise[j], color="0.85",
+                            lw=0, label="measured +- 2 sigma")
         ax.plot(times, measured[:, j], color="k", lw=0.8, label="measured")
         if initial is not None:
             ax.plot(times, initial[:, j], color="tab:blue", lw=0.7, ls=":", label=labels[0])
         if optimum is not None:
             ax.plot(times, optimum[:, j], color="tab:red", lw=0.7, ls="--", label=labels[1])
-        ax.set_ylabel(f"{LABELS[j]}, N", fontsize=8)
+        ylabel = f"{LABELS[j]}, N"
+        if last is not None:
+            rmsd = float(np.sqrt(np.mean((measured[:, j] - last[:, j]) ** 2)))
+            ylabel += f"\nRMSD {rmsd:.3g} N" + (f" = {rmsd / noise[j]:.2f} sigma" if noise is not None else "")
+        ax.set_ylabel(ylabel, fontsize=7)
         ax.grid(alpha=0.3)
-    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
+    axes[0].legend(loc="upper right", fontsize=8, ncol=4)
     axes[-1].set_xlabel("time after the trigger, s")
-    fig.suptitle(title)
+    if tare is not None:
+        title += " (simulations shifted by the zero error within the transducer's tolerance, as the objective sees them)"
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     return save_figure(fig, path)
 
