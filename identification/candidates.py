@@ -162,8 +162,8 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     line = getattr(sc.hypothesis, "origin", "scan") == "line" and regrow_evals > 0
     # and an effect the CoRs absorb (catalogue: ABSORBED) is searched with them, free from the first
     # window; where the linear test passed it is also searched held there, as before, and the lower
-    # kept (mass_a4_r00, a 3 % heavier cart 0: confirmed with the held start alone, left with a clock
-    # beyond it with the free start alone, confirmed with both)
+    # kept (on one rates-benchmark record with a 3 % heavier cart 0: confirmed with the held start
+    # alone, left with a clock beyond it with the free start alone, confirmed with both)
     absorbed = CATALOGUE[sc.effect].ABSORBED and regrow_evals > 0
     linear = lr_lin.significant and lr_lin.dbic > 0
     if not (lr_held.significant and lr_held.dbic > 0) and \

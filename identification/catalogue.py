@@ -224,11 +224,11 @@ class MotorRipple(Effect):
     hypotheses are built around it instead: LINE_STEPS pitches over the line's
     doubt (a resolution cell), probed at LINE_PROBE. On a chaotic record a
     100 N probe's signature is the trajectory's divergence, not the ripple's
-    line (motor_ripple_a5_r04: the scan ranked 117 mm first, the drawn pitch
-    73 mm; at 5 N the signature peaks at the line). Such a hypothesis is then
-    fitted with the base over growing windows even when its fit with the base
-    held fails (candidates.examine_candidate), its phase free over the whole
-    circle."""
+    line (on one ripple record of the rates benchmark the scan ranked 117 mm
+    first, the drawn pitch 73 mm; at 5 N the signature peaks at the line).
+    Such a hypothesis is then fitted with the base over growing windows even
+    when its fit with the base held fails (candidates.examine_candidate), its
+    phase free over the whole circle."""
     name, title, unit = "motor_ripple", "linear-motor thrust ripple", "N"
     PROBE = 100.0
     P_MIN, P_MAX = 0.05, 0.23     # m, pole pitches of the linear motors of a sorter catalogue
@@ -384,7 +384,7 @@ def _only(base: np.ndarray, j: int, column) -> np.ndarray:
 class TransducerMass(Effect):
     name, title, unit = "mass", "unequal carts: the transducer cart's mass", "1"
     PROBE = 0.1
-    # a quarter heavier cart 7 (mass_a5_r01): held at the base's CoRs the fitted factor lowered S
+    # a quarter heavier cart 7 (one rates-benchmark record): held at the base's CoRs the fitted factor lowered S
     # per sample from 23.5 to 21.3 only, and a sensor gain took 71 % of the misfit instead
     ABSORBED = True
 

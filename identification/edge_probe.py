@@ -4,11 +4,11 @@ The Complex-RF reflects a point that leaves the box back inside it, so the
 region along an edge is the one its points visit least, and the
 Levenberg-Marquardt refinement after it goes down the valley it starts in.
 Where the truth lies close to an edge the two together can stop in a
-neighbouring local minimum a few hundredths further in: on m15 (layout 5,
-three start-stops, e_RW true 0.200 on its lower bound) the pipeline ended at
-e_RW 0.241, f 20.9275, with an interval of +-0.016 that missed the truth;
-the same refinement started from the point with e_RW moved onto the edge
-ends at e_RW 0.203, f 20.918, below it (110 CPU-s).
+neighbouring local minimum a few hundredths further in: on one layout-5
+record (three start-stops, e_RW true 0.200 on its lower bound) the pipeline
+ended at e_RW 0.241, f 20.9275, with an interval of +-0.016 that missed the
+truth; the same refinement started from the point with e_RW moved onto the
+edge ends at e_RW 0.203, f 20.918, below it (110 CPU-s).
 
 `edge_probes` does that for each identifiable CoR whose estimate lies within
 EDGE_SHARE of its range from an edge: the refinement from the point with

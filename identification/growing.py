@@ -48,8 +48,9 @@ UNSEEN_STEP = 0.05   # share of a variable's range moved to see whether the firs
 UNSEEN_DS = 1e-6     # ... S changing by less than this (a chi^2 unit is 1): not seen at all
 RETRY_Z = 3.0        # a retry is asked where the first window's S is this many sd of chi^2 above its mean
                      # (no margin): stricter than the at-noise test of the intervals, as the retry only
-                     # costs simulations and is taken only where it fits the first window better (m12's
-                     # complex: 1.15 per sample, 4.6 sd, its trail off the truth's valley)
+                     # costs simulations and is taken only where it fits the first window better (on one
+                     # layout-4 record the complex ended at 1.15 per sample, 4.6 sd, its trail off the
+                     # truth's valley)
 
 
 def windows(duration: float, first: float = FIRST, growth: float = GROWTH) -> list:
@@ -199,7 +200,7 @@ def records_off(q, sim, w, z: float = RETRY_Z) -> list:
     """The records (column blocks of 7: a joint problem's records side by
     side) whose S at `sim` lies more than `z` sd of chi^2 above its mean,
     with no margin. Per record, as the joint S hides one record carried off
-    by the others' fit (m19's fit at 1.2 s: 1.126 per sample on its first
+    by the others' fit (a layout-6 fit at 1.2 s: 1.126 per sample on its first
     record, 1.035 and 1.048 on the others, 1.07 together, at the noise by
     the joint test of uncertainty.at_noise)."""
     per, limit = record_S(q, sim, w, z)

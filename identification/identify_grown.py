@@ -2,10 +2,11 @@
 (issue 17: the paper's ten variables free).
 
 With all ten design variables free the published complex over a whole
-start-stop stops in another valley (m01: 2.4 x f(truth) after about 1500
-CPU-s), and the staged pipeline's first stage lands the drive in a wrong
-valley where the CoRs' start values ask it for what only the CoRs can give
-(m13 with three records: 30-50 x f(truth), e_JA 0.56 off). The close loop's
+start-stop stops in another valley (on one layout-1 record: 2.4 x f(truth)
+after about 1500 CPU-s), and the staged pipeline's first stage lands the
+drive in a wrong valley where the CoRs' start values ask it for what only
+the CoRs can give (on one layout-5 sorter with three records: 30-50 x
+f(truth), e_JA 0.56 off). The close loop's
 base (identification.growing) avoids both: the complex where the record is
 still a smooth function of the design (its first 0.3 s), then
 Levenberg-Marquardt carried along windows growing to the whole record.

@@ -3,10 +3,11 @@
 Three start-stops of one sorter share ten design variables and each has its
 own trigger point. The complex over all twelve on the records' first 0.3 s
 stops above the noise on some measurements where one record alone does not
-(m08: 2.2 per sample on the first window with three records, 1.05 with
-one; m21: 8.5 against 1.8), and a trail that starts off the truth's valley
-drifts further as the windows grow (m19: 1.2 per sample on the first
-window, 30 at 0.9 s; with one record 1.0 to 0.9 s).
+(on one layout-2 record: 2.2 per sample on the first window with three
+records, 1.05 with one; on one layout-7 record: 8.5 against 1.8), and a
+trail that starts off the truth's valley drifts further as the windows grow
+(on one layout-6 record: 1.2 per sample on the first window, 30 at 0.9 s;
+with one record 1.0 to 0.9 s).
 
 `single_start` starts instead from the first record alone, identified over
 its growing windows (growing.grow: the complex on its first window, two
@@ -79,7 +80,7 @@ def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
     x0, info = grow(first_part, evals=evals, first=first, seed=seed, journal=jr, channel_weights=w[:n],
                     profile_points=profile_points, reset_unseen=True, keep_points=True)
     # its point at the longest window still at the noise: past the onset of chaos the trail is carried
-    # off (m19's first record: 1.03 per sample up to 0.9 s, 7.5 on its whole 2.5 s)
+    # off (the first record of one layout-6 fit: 1.03 per sample up to 0.9 s, 7.5 on its whole 2.5 s)
     t0 = float(first_part.times[0])
     fits = [t for t in info["windows"]
             if at_noise(truncated(first_part, t0 + t["window_s"]), t["S_per_sample"] * n)] or info["windows"][:1]

@@ -1,8 +1,8 @@
 """An effect probed on a ladder (the joint play: catalogue.JointClearance) is
 extended within one rung, where its landscape is a single valley. The rung is
 the linear ranking's pick at the base's CoRs, and those CoRs have absorbed
-part of the effect: on joint_clearance_a5_r00 of the rates benchmark (20 um
-drawn) the pick was the 7.7 um rung and the extension ended on its upper
+part of the effect: on one record of the rates benchmark (20 um drawn) the
+pick was the 7.7 um rung and the extension ended on its upper
 bound, 11.5 um, 37 times above the noise (docs/close_loop.md). The gap and
 the CoRs move together there: with the CoRs held at that point, every other
 gap from 3.3 to 40 um fitted worse. So an extension that ends on its rung's
@@ -84,7 +84,7 @@ def widened(effect: str, problem):
     """`problem` with its ladder variable's rung widened by a whole rung on
     each side (the rungs beside it joined to it). For the joint fit of the
     base and the effect over growing windows: the rung was picked at the
-    base's CoRs, and on joint_clearance_a4_r03 (4 um drawn) the pick was the
+    base's CoRs, and on one record of the rates benchmark (4 um drawn) the pick was the
     7.7 um rung, whose lower edge fits far worse than 4 um at the true CoRs
     (430 per sample at 5 um against 0.33); on the first 0.3 s window the gap's landscape is
     smooth enough to be searched across three rungs (2.3 to 26 um: 4.00 um,

@@ -11,11 +11,11 @@ contracts with the CoRs wherever they happened to be (layout 1, start-stop:
 six near their optimum with the CoRs at their start values; the complex then
 searches only the CoRs, whose landscape is the rough one, and every
 evaluation reuses the relaxed chain at rest (lss_fmu.runner); the last
-Levenberg-Marquardt moves all ten together to the bottom. Measured on the
-start-stop of layout 1 (m01): 1.00x f(truth) in 315 simulations, 86 CPU-s.
+Levenberg-Marquardt moves all ten together to the bottom. Measured on a
+start-stop of layout 1: 1.00x f(truth) in 315 simulations, 86 CPU-s.
 
 The ordering is not always right: where the CoRs at their start values put
-the six in another valley (layout 7's m20: the first stage walks the gain
+the six in another valley (a layout-7 record: the first stage walks the gain
 K_I onto its bound), the stages end far above the noise. With the
 likelihood objective that is known (the noise is declared: `at_noise`), and
 `fallback_evals` then runs identify's own pipeline from the start values

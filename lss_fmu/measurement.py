@@ -15,7 +15,7 @@ rejected with a `MeasurementError` naming the file, the line (and data row)
 and the column; no sample is dropped, reordered in time or resampled.
 
     from lss_fmu.measurement import load_measurement
-    m = load_measurement("data/recovery/m05")
+    m = load_measurement("data/recovery/mNN")
     m.samples            # DataFrame: time + 11 channels, as in the file
     m.forces             # the 7 force channels (DataFrame)
     m.meta               # dict from meta.json

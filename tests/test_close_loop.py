@@ -61,7 +61,7 @@ def _evidence_reported(rnd) -> None:
 # one seed per effect (180-265 CPU-s a case at 184-187 ns per cart and right-hand side; the out-of-round
 # wheel: the two-effects case and the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were
 # confirmed too when written (docs/close_loop.md); the rates over many records:
-# benchmarks/bench_close_loop_rates.py. The mass's case in make test: the benchmark's mass_a5_r01 below.
+# benchmarks/bench_close_loop_rates.py. The mass's case in make test: the benchmark's cart a quarter heavier, below.
 @pytest.mark.parametrize("effect, seed", [pytest.param("sensor", 11, marks=SLOW),
                                           pytest.param("joint_clearance", 11, marks=SLOW),
                                           pytest.param("mass", 12, marks=SLOW)])
@@ -139,7 +139,7 @@ def test_the_issues_own_misses_are_confirmed(fmu_file, effect, params, seed, tra
 
 @SLOW   # make test runs this case on the CPU's two widest paths: tests/test_cross_path.py
 def test_a_mass_the_cors_absorbed_is_searched_with_them(fmu_file):
-    """The benchmark's record mass_a5_r01 (cart 7 a quarter heavier): held at
+    """A record of the rates benchmark with cart 7 a quarter heavier: held at
     the base's CoRs the fitted factor lowered S per sample from 23.5 to 21.3
     only, the linear fit was not significant either, so the mass was never
     searched with the CoRs; a sensor gain took 71 % of the misfit and nothing
@@ -160,11 +160,11 @@ def test_a_mass_the_cors_absorbed_is_searched_with_them(fmu_file):
 
 
 @SLOW
-@pytest.mark.parametrize("seed, transducer", [(1458325094, 26)])   # the benchmark's mass_a3_r04
+@pytest.mark.parametrize("seed, transducer", [(1458325094, 26)])   # a record of the rates benchmark
 def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
     """The transducer cart 1 % heavier: a motor ripple fitted in its place
-    took a share of the misfit past every test (the benchmark's record
-    mass_a3_r04: S per sample from 12.1 to 10.5), but the model with it
+    took a share of the misfit past every test (on one record of the rates
+    benchmark: S per sample from 12.1 to 10.5), but the model with it
     stayed ten times above the noise. Only an effect whose model reaches the
     noise, or removes most of the misfit above it, is confirmed: the mass,
     or nothing."""
@@ -179,7 +179,7 @@ def test_a_share_of_another_effect_is_not_confirmed(fmu_file, seed, transducer):
 
 
 @SLOW
-@pytest.mark.parametrize("seed, transducer", [(435425658, 26)])   # the benchmark's joint_clearance_a3_r04
+@pytest.mark.parametrize("seed, transducer", [(435425658, 26)])   # a record of the rates benchmark
 def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transducer):
     """A 1 um play in every joint: a track bump at one joint, fitted with the
     CoRs, can take most of the misfit; the play is probed on a ladder of gaps

@@ -5,9 +5,9 @@ the command on the saturation (a sliding motion). With the integrator
 switched off at the limit at once, zdot switched at every step and the
 solver fell to steps of 1e-7 s: 170 CPU-s for 0.3 s of layout 1 where 0.3
 s suffice, a few such points in a complex costing more than all the others
-(the rig's start-up m01, 13 of 147 points). The switch spread over a band of
-1e-3 F_max keeps zdot continuous; the command stays within the band of the
-limit, as the sliding motion has it.
+(on the rig's start-up of one layout-1 record, 13 of 147 points). The
+switch spread over a band of 1e-3 F_max keeps zdot continuous; the command
+stays within the band of the limit, as the sliding motion has it.
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ window starts from the grown trail's own point, and what the pipeline cannot
 do is refused with a message. What it recovers with the ten variables free
 costs 3-6 CPU-minutes a record and is measured in benchmarks
 (bench_recovery.py --grown, docs/identification.md), not here: at a test's
-budget (150 evaluations on 1.5 s of m01) the first window stopped at 1.85
+budget (150 evaluations on 1.5 s of that record) the first window stopped at 1.85
 times the noise and the whole record at 5 times f(truth).
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ def start_stop_layout1(rig_record):
 def test_what_the_first_window_cannot_see_goes_back_to_its_start(start_stop_layout1):
     """On a start-stop's first 0.3 s the motors are saturated: v_ref, K_P and
     K_I move nothing, so the complex leaves them wherever its last point put
-    them (K_P 1240 above the truth on layout 6's m19). growing._reset_unseen
+    them (K_P 1240 above the truth on a layout-6 record). growing._reset_unseen
     puts exactly those back to their start values (meta.json's nominal ones)
     and keeps everything the window does see (the CoRs, the pretension, the
     trigger point)."""

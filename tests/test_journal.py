@@ -1,8 +1,8 @@
 """A journal answers for the objective that wrote it only (identification.journal).
 
 Resumed into an objective that has changed since (here: another bowl; on a
-record, the logger's filter run at another rate, the change of commit
-f9a0df0), its values would steer the optimiser through a landscape that is
+record, the logger's filter run at another rate, as when it left the
+communication grid), its values would steer the optimiser through a landscape that is
 not there. The journal's best point is evaluated again first: a journal that
 disagrees is set aside (`.stale`, its refinement with it) and the run is the
 fresh run; one that agrees is replayed as before.
@@ -100,9 +100,9 @@ def record(rig_record):
 
 
 def test_a_journal_of_the_filter_on_the_grid_is_not_replayed(record, tmp_path):
-    """The journals of the three-record runs before commit f9a0df0 ran the
-    logger's filter on the communication grid: resumed into today's
-    objective, each would have been replayed as it stood."""
+    """A journal written while the logger's filter still ran on the
+    communication grid (as three-record runs once did): resumed into today's
+    objective, it would have been replayed as it stood."""
     p = from_measurement(record, "LW", window=0.3, tare=True, objective="likelihood")
     assert p.filter_rate is not None
     grid = dataclasses.replace(p, filter_rate=None)

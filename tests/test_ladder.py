@@ -45,7 +45,7 @@ def _local_fit(w, calls):
 
 def test_a_play_stopped_on_the_rung_below_is_walked_up_to_it(fmu_file):
     """20 um drawn, the extension on the 7.7 um rung ended at its upper bound
-    (joint_clearance_a5_r00 of the rates benchmark)."""
+    (as on one record of the rates benchmark)."""
     ext, x, S, sim, w = _on_rung(20e-6, 7.69e-6, 20e-6)
     assert np.isclose(x[-1], ext.bounds[GAP][1])   # clipped to the rung: on its edge
     calls = []
@@ -75,7 +75,7 @@ def test_an_effect_without_a_ladder_is_left_alone():
 
 def test_the_joint_fit_searches_the_rungs_beside_the_ranked_one(fmu_file):
     """4 um drawn, the ranking's rung 7.7 um (5.1 to 11.5 um), as on
-    joint_clearance_a4_r03 of the rates benchmark: there the held fit at the
+    one record of the rates benchmark: there the held fit at the
     rung's lower edge stayed 4 times above the base and the joint fit within
     the rung never left that edge. Widened by a rung on each side and free on
     the first window, the joint fit of CoRs and gap finds the drawn gap; the

@@ -9,7 +9,7 @@ CoRs from random ones. This is the finding the issue asks to show instead of
 a loosened recovery test; the transient, where the CoRs are identifiable, is
 tests/test_identification.py.
 
-Measurement 22 (layout 7, 3 m/s, the cheapest of the set) is made here with a
+The cheapest measurement of the set (layout 7, 3 m/s) is made here with a
 1 s record; the test reads the answer file, identification never does.
 """
 from __future__ import annotations

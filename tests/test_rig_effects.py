@@ -258,7 +258,7 @@ def _fmu_has(names):
 
 
 def test_artefact_through_the_sensor_changes_one_channel_near_its_place(sim):
-    """A short run of measurement 20 with and without the artefact, placed in
+    """A short run of a layout-7 measurement with and without the artefact, placed in
     the middle of the logged window: only its channel differs, only around the
     passage, by about its amplitude (the 100 Hz filter passes a 0.1-0.3 s pulse)."""
     base = rig.make_case("recovery", 20, lap_seconds=1.5)
@@ -287,7 +287,7 @@ def test_artefact_through_the_sensor_changes_one_channel_near_its_place(sim):
 
 
 def test_measurement_with_effects_looks_like_any_other(tmp_path):
-    """Measurement 20 (short) with every effect and the artefact, and without:
+    """A short layout-7 measurement with every effect and the artefact, and without:
     meta.json and the files around it are the same, the samples are not, the
     truth records every effect and the artefact, and the staleness check tells
     the two apart."""

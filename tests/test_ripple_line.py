@@ -96,7 +96,7 @@ def test_without_a_line_the_scan():
 
 def test_a_ripple_in_the_chain_shows_its_line():
     """Through the FMU: a 100 N ripple of 73 mm under the transducer cart 26
-    (motor_ripple_a5_r04 of the rates benchmark, where the 100 N scan ranked
+    (as on one record of the rates benchmark, where the 100 N scan ranked
     117 mm first); at the clean model's true CoRs one of the residual's
     lines is the ripple's order within half a resolution cell."""
     from identification.locate import signals_at, unwrap

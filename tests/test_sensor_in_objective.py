@@ -71,7 +71,7 @@ def test_modelled_filter_removes_the_group_delay_from_the_residual(logged):
 
 
 def test_at_the_truth_of_a_start_stop_only_the_noise_is_left(rig_record):
-    """Layout 5's start-stop (measurement 13): the drive's start and stop
+    """A start-stop of layout 5: the drive's start and stop
     shake the joint; filtered at the communication grid's 600 Hz, the axial
     force's mean square at the truth stood 10 standard deviations above its
     noise (1.72 noise variances on 1.5 s); at the logger's rate each channel

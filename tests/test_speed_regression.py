@@ -1,7 +1,7 @@
 """The speed work (issue 8) must not change the physics.
 
 tests/data/speed_ref_layout7.csv was written by the chain core as it was
-BEFORE the speed work (commit 7eeefe3), at solver.tolerance 1e-8: layout7 with
+BEFORE the speed work, at solver.tolerance 1e-8: layout7 with
 default parameters, 1.5 s from the start, 300 Hz, with the transducer on
 cart 0 (straight), cart 6 (ramp) and cart 20 (180 degree curve). The current
 FMU must reproduce the 7 force channels to a 7-channel NRMSD (largest per

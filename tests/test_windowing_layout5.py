@@ -1,7 +1,7 @@
 """A record that turns chaotic, identified on a shorter window (issue 17,
 identification.windowing).
 
-Layout 5's start-stop of measurement 13, the drive known, the four CoRs free,
+A start-stop of layout 5, the drive known, the four CoRs free,
 the likelihood objective: on its first 1.5 s the steering wheels already
 bounce in the guide once the drive brakes, and the roughness check calls the
 CoRs not smooth (benchmarks/bench_information.py). identify_windowed must see

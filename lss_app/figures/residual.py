@@ -1,7 +1,7 @@
 """Figures of a residual analysis (identification.residual), PNG and SVG.
 
     from lss_app.figures.residual import residual_figures
-    paths = residual_figures(analysis, "out/m20/residual", measured, simulated)
+    paths = residual_figures(analysis, "out/mNN/residual", measured, simulated)
 
 1. residual_time    residual per channel over time, its mean dashed, track
                     elements shaded, track position on the top axis
