@@ -60,6 +60,7 @@ def start_stop(rig_record):
     return rig_record(19, "start-stop", 2.2)
 
 
+@pytest.mark.slow   # make test: the front door on a start-stop, tests/test_front_door.py
 def test_a_start_stop_identification_finds_the_cors(start_stop):
     """The protocol and the objective docs/identification.md found best: a
     start-stop (layout 6, the transducer where the rig parked it), the
