@@ -46,8 +46,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import numpy as np  # noqa: E402
+
+from bench_common import hash_sources  # noqa: E402
 
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 
@@ -242,12 +245,7 @@ def run_case(case: dict, budget: dict = BUDGET) -> dict:
 def code_stamp() -> str:
     """A short hash of what decides a case's outcome: the loop's and the model's sources (identification,
     lss_fmu, fmu_src) and this file's case making and budgets; not the report, not the tests."""
-    h = hashlib.sha256()
-    for folder in ("identification", "lss_fmu", "fmu_src"):
-        for path in sorted((ROOT / folder).rglob("*")):
-            if path.is_file() and "__pycache__" not in path.parts and path.suffix != ".pyc":
-                h.update(path.relative_to(ROOT).as_posix().encode())
-                h.update(path.read_bytes())
+    h = hash_sources(hashlib.sha256())
     for fn in (_rng, cases, _moving_channels, synthetic_problem, rig_problem, run_case):
         h.update(inspect.getsource(fn).encode())
     h.update(repr((BUDGET, CARTS, FAMILIES, OOC, RIG_CLEAN, SYN_CLEAN)).encode())

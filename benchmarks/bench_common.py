@@ -144,6 +144,18 @@ def machine() -> str:
             f"Python {platform.python_version()}; CC {os.environ.get('CC', 'gcc')} {' '.join(build.CFLAGS)}")
 
 
+def hash_sources(h):
+    """`h` (a hashlib object) updated with the path and bytes of every source file of
+    identification/, lss_fmu/ and fmu_src/, in sorted order: what decides a result, for a
+    benchmark's code stamp. Returns h."""
+    for folder in ("identification", "lss_fmu", "fmu_src"):
+        for path in sorted((ROOT / folder).rglob("*")):
+            if path.is_file() and "__pycache__" not in path.parts and path.suffix != ".pyc":
+                h.update(path.relative_to(ROOT).as_posix().encode())
+                h.update(path.read_bytes())
+    return h
+
+
 def code_version() -> str:
     """The commit a result was computed on, '+changes' when the model or
     identification code differs from it (so a table says which code it is from)."""

@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.identify import _local, point_of  # noqa: E402
+from identification.identify import local_stage  # noqa: E402
+from identification.journal import point_of  # noqa: E402
 from identification.problem import from_measurement  # noqa: E402
 from identification.windowing import LADDER, troubles, truncated  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
@@ -59,7 +60,7 @@ def replay(data: Path, journals: Path, n: int, refine_evals: int, window: float)
                 break
             q = problem if s is None else truncated(problem, s)
             f0 = float(q(x0))
-            local = _local(q, x0, f0, refine_evals, True, None)
+            local = local_stage(q, x0, f0, refine_evals, True, None)
             x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f0 else (x0, f0)
             ivs = local.get("intervals") or []
             trouble = troubles(SimpleNamespace(intervals=ivs))

@@ -4,7 +4,7 @@
 A result of bench_recovery.py (its mNN.json: the records, the window, the
 point found) is taken up again: along a grid of the variable, every other
 free variable refitted by the pipeline's Levenberg-Marquardt (central
-differences, as identify._local), each grid point started from its
+differences, as identify.local_stage), each grid point started from its
 neighbour's fit, outwards from the estimate. The profile's statistic is the
 likelihood ratio in the metric of the Jacobian interval
 (identification.uncertainty: each channel's variance and effective sample

@@ -144,7 +144,7 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
     scores, failed = [], []
     for effect, hyp in todo:
         try:
-            G = [demean_columns(g, demean) for g in _signatures(problem, x, sim0, hyp, bar)]
+            G = [demean_columns(g, demean) for g in sensitivity_signatures(problem, x, sim0, hyp, bar)]
         except Exception as exc:
             log.warning("effect %s, %s: probe failed: %s", effect.name, hyp.label, exc)
             failed.append({"effect": effect.name, "hypothesis": hyp.label, "error": str(exc)[:300]})
@@ -169,7 +169,7 @@ def demean_columns(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return g
 
 
-def _signatures(problem, x, sim0, hyp: Hypothesis, bar) -> list:
+def sensitivity_signatures(problem, x, sim0, hyp: Hypothesis, bar) -> list:
     G = []
     for p in hyp.probes:
         if p.analytic is not None:

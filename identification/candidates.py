@@ -97,13 +97,13 @@ def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0:
     """The effect's signature at the base (the attribution's probes; for the
     sensor those of the channels the extension frees, unless `every`), tared
     channels demeaned."""
-    from .attribution import _signatures
+    from .attribution import sensitivity_signatures
     probes = sc.hypothesis.probes
     if isinstance(CATALOGUE[sc.effect], SensorError) and not every:
         names = set(ext.free)
         probes = [p for p in probes if f"effects.sensor.{p.label.replace(' ', '.')}" in names]
     hyp = dataclasses.replace(sc.hypothesis, probes=probes)
-    G = _signatures(base, x, sim0, hyp, None)
+    G = sensitivity_signatures(base, x, sim0, hyp, None)
     demean = np.zeros(sim0.shape[1], bool)
     if base.tare is not None:
         demean = np.abs((base.samples - sim0).mean(axis=0)) <= base.tare

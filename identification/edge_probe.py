@@ -54,8 +54,8 @@ def edge_probes(problem, x, f: float, intervals, refine_evals: int, journal: Opt
     """(x, f, intervals, probes): the point after the probes (module
     docstring) and one entry per probe (the CoR, its edge, f from there,
     simulations, whether it was kept). Each probe's refinement is kept in a
-    journal of its own (identify._local), so a resumed run does not pay again."""
-    from .identify import _local
+    journal of its own (identify.local_stage), so a resumed run does not pay again."""
+    from .identify import local_stage
     x = np.asarray(x, float)
     probes = []
     if refine_evals <= 0:
@@ -68,7 +68,7 @@ def edge_probes(problem, x, f: float, intervals, refine_evals: int, journal: Opt
             Path(journal).with_name(Path(journal).stem + f".edge.{name.split('.')[-1]}.jsonl")
         try:
             f_start = float(problem(xs))
-            local = _local(problem, xs, f_start, int(refine_evals), False, jr)
+            local = local_stage(problem, xs, f_start, int(refine_evals), False, jr)
         except Exception as exc:   # a probe that fails leaves the result as it was
             log.warning("%s: probe from the edge of %s failed: %s", problem.name, name, exc)
             continue
@@ -83,7 +83,7 @@ def edge_probes(problem, x, f: float, intervals, refine_evals: int, journal: Opt
     x, f = best[0], best[1]
     probes[best[2]]["kept"] = True
     jr = None if journal is None else Path(journal).with_name(Path(journal).stem + ".edge.jsonl")
-    again = _local(problem, x, f, 0, True, jr).get("intervals")
+    again = local_stage(problem, x, f, 0, True, jr).get("intervals")
     log.info("%s: from the edge of %s f = %.6g is kept", problem.name, probes[best[2]]["name"], f)
     return x, f, again if again is not None else intervals, probes
 

@@ -29,7 +29,7 @@ from .complex_rf import minimize_complex
 from lss_fmu.design import symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
-from .journal import Journal, JournaledObjective, _key, journaled_map
+from .journal import Journal, JournaledObjective, point_key, journaled_map
 from .optim_result import ComplexResult, jsonable
 from .problem import LINEARISABLE, IdentificationProblem
 
@@ -168,12 +168,12 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
         last, best = runs[-1], min(runs, key=lambda q: q.fun)
         history_f = np.concatenate([np.asarray(q.history.f, float)[q.history.used_order()] for q in runs])
         f0 = float(history_f[0])  # x0 is the first point of the initial complex
-        H0 = _safe_H(problem, x0)
+        H0 = safe_nrmsd(problem, x0)
         x_best, f_best = np.asarray(best.x, float), float(best.fun)
-        local = _local(problem, x_best, f_best, refine_evals, uncertainty, journal)
+        local = local_stage(problem, x_best, f_best, refine_evals, uncertainty, journal)
         if local.get("f", np.inf) < f_best:
             x_best, f_best = np.asarray(local["x"], float), float(local["f"])
-        H = _safe_H(problem, x_best)
+        H = safe_nrmsd(problem, x_best)
     finally:
         jr.close()
     message = last.message if len(runs) == 1 else f"{last.message} (after {len(runs) - 1} restarts)"
@@ -204,7 +204,7 @@ def _presolve(problem, evals: int, seed, journal, progress, f_tol, x_tol, worker
                     progress=progress, f_tol=f_tol, x_tol=x_tol, workers=workers)
 
 
-def _local(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path]) -> dict:
+def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path]) -> dict:
     """The refinement and the intervals after the complex, kept in
     JOURNAL.local.json (atomically) for the resume of an interrupted run."""
     from lss_fmu.atomic import write_json_atomic
@@ -220,7 +220,7 @@ def _local(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optiona
     side = Path(journal).with_suffix(".local.json") if journal else None
     # f at the start, as this objective gives it: a refinement kept from an objective that has changed
     # since (journal.vouch) is not taken up
-    key = {"start": _key(x), "f_start": float(f), "refine_evals": int(refine_evals),
+    key = {"start": point_key(x), "f_start": float(f), "refine_evals": int(refine_evals),
            "uncertainty": bool(uncertainty)}
     if side is not None and side.exists():
         try:
@@ -288,7 +288,7 @@ def _joined_iterations(runs: list) -> dict:
     return {k: np.concatenate(v) for k, v in out.items()}
 
 
-def _safe_H(problem: IdentificationProblem, x) -> np.ndarray:
+def safe_nrmsd(problem: IdentificationProblem, x) -> np.ndarray:
     try:
         return problem.channel_errors(x)
     except Exception:

@@ -164,7 +164,7 @@ def _safe_f(q, x) -> float:
 def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start,
           halvings):
     """One grown identification (identify_grown without restarts)."""
-    from .identify import IdentificationResult, _local, _safe_H
+    from .identify import IdentificationResult, local_stage, safe_nrmsd
     t0 = time.time()
     x0 = problem.x0_vector()
     if x0 is None:
@@ -191,7 +191,7 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     elif info.get("retry") and info["retry"]["taken"]:
         started = box["info"]
     f = float(problem(x))
-    local = _local(problem, x, f, int(refine_evals), uncertainty, journal)
+    local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
     nfev = int(info["nfev"]) + 1 + int((local.get("refined") or {}).get("nfev", 0))
@@ -211,8 +211,8 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
         message += f"; unseen on the first window, started from their start values: {', '.join(info['unseen'])}"
     if local.get("refined"):
         message += f"; refined to f = {f:.4g} in {local['refined']['nfev']} simulations"
-    res = IdentificationResult(problem, np.asarray(x0, float), f0, _safe_H(problem, x0), np.asarray(x, float), f,
-                               _safe_H(problem, x), nfev, nfev, 0, message, np.array([f0, f]), time.time() - t0,
+    res = IdentificationResult(problem, np.asarray(x0, float), f0, safe_nrmsd(problem, x0), np.asarray(x, float), f,
+                               safe_nrmsd(problem, x), nfev, nfev, 0, message, np.array([f0, f]), time.time() - t0,
                                refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
     if shrink:
         res = _shrunk(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
@@ -222,7 +222,7 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
 def _from_edges(res, refine_evals, journal):
     """`res` after the edge probes at its own window (identification.edge_probe)."""
     from .edge_probe import edge_probes
-    from .identify import _safe_H
+    from .identify import safe_nrmsd
     q = res.problem
     jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{float(q.times[-1]):g}.jsonl")
     x, f, ivs, probes = edge_probes(q, res.x, float(res.f), res.intervals, refine_evals, jr)
@@ -235,7 +235,7 @@ def _from_edges(res, refine_evals, journal):
         + (f" ({kept[0]['name'].split('.')[-1]} kept, at {kept[0]['to']:.3g})" if kept else " (none lower)")
     if not kept:
         return dataclasses.replace(res, nfev=res.nfev + extra, evaluated=res.evaluated + extra, message=message)
-    return dataclasses.replace(res, x=np.asarray(x, float), f=float(f), H=_safe_H(q, x), intervals=ivs,
+    return dataclasses.replace(res, x=np.asarray(x, float), f=float(f), H=safe_nrmsd(q, x), intervals=ivs,
                                nfev=res.nfev + extra, evaluated=res.evaluated + extra, message=message,
                                history_f=np.append(res.history_f, f))
 
@@ -244,7 +244,7 @@ def _shrunk(problem, res, trail, ladder, refine_evals, journal, t0):
     """`res`, or the first shorter window of `ladder` without troubles (else
     the shortest), each refined from the trail's point at the longest grown
     window not beyond it."""
-    from .identify import _local, _safe_H
+    from .identify import local_stage, safe_nrmsd
     full = float(problem.times[-1])
     tried = [{"window_s": full, "f": float(res.f), "troubles": troubles(res), "seconds": float(res.seconds)}]
     steps = [s for s in sorted({float(s) for s in ladder}, reverse=True) if s < full - 1e-9]
@@ -258,12 +258,12 @@ def _shrunk(problem, res, trail, ladder, refine_evals, journal, t0):
         q = truncated(problem, s)
         jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{s:g}.jsonl")
         f_start = float(q(x_start))
-        local = _local(q, x_start, f_start, refine_evals, True, jr)
+        local = local_stage(q, x_start, f_start, refine_evals, True, jr)
         x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f_start \
             else (x_start, f_start)
         extra = int((local.get("refined") or {}).get("nfev", 0)) + 1
-        res = dataclasses.replace(res, problem=q, x=x, f=f, H=_safe_H(q, x), f0=float(q(res.x0)),
-                                  H0=_safe_H(q, res.x0), nfev=res.nfev + extra, evaluated=res.evaluated + extra,
+        res = dataclasses.replace(res, problem=q, x=x, f=f, H=safe_nrmsd(q, x), f0=float(q(res.x0)),
+                                  H0=safe_nrmsd(q, res.x0), nfev=res.nfev + extra, evaluated=res.evaluated + extra,
                                   refined=local.get("refined"), intervals=local.get("intervals"),
                                   history_f=np.append(res.history_f, f))
         tried.append({"window_s": float(q.times[-1]), "f": f, "troubles": troubles(res),

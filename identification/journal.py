@@ -29,12 +29,12 @@ log = logging.getLogger(__name__)
 VOUCH_RTOL = 1e-6   # a journaled f evaluated again agrees this closely (the simulation is deterministic)
 
 
-def _key(x) -> str:
+def point_key(x) -> str:
     return np.asarray(x, float).tobytes().hex()
 
 
 def point_of(key: str) -> np.ndarray:
-    """The point a _key was made from (the start of a stored refinement: JOURNAL.local.json)."""
+    """The point a point_key was made from (the start of a stored refinement: JOURNAL.local.json)."""
     return np.frombuffer(bytes.fromhex(key), dtype=float).copy()
 
 
@@ -66,13 +66,13 @@ class Journal:
         self._fh = open(self.path, "a") if self.path else None
 
     def get(self, x) -> Optional[float]:
-        f = self.cache.get(_key(x))
+        f = self.cache.get(point_key(x))
         if f is not None:
             self.replayed += 1
         return f
 
     def put(self, x, f: float) -> None:
-        k = _key(x)
+        k = point_key(x)
         self.cache[k] = f
         if self._fh:
             self._fh.write(json.dumps({"k": k, "x": list(map(float, x)), "f": f}) + "\n")

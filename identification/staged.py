@@ -81,7 +81,7 @@ def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, sta
     FALLBACK_PRESOLVE, this budget and
     FALLBACK_RESTARTS restarts, then the same refinement; the better result
     is returned."""
-    from .identify import REFINE_STEP, IdentificationResult, _local, _safe_H, identify
+    from .identify import REFINE_STEP, IdentificationResult, local_stage, safe_nrmsd, identify
     from .refine import refine
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
         raise ValueError(f"staged identification: the {problem.objective} objective is not a sum of squares "
@@ -123,7 +123,7 @@ def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, sta
         nfev += res.nfev
     x = np.array([start[n] for n in problem.free])
     f = float(res.f) if res is not None else float(problem(x))
-    local = _local(problem, x, f, int(refine_evals), uncertainty, journal)
+    local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
     nfev += int((local.get("refined") or {}).get("nfev", 0))
@@ -133,7 +133,7 @@ def identify_staged(problem: IdentificationProblem, *, max_evals: int = 120, sta
         ([f"refined to f = {f:.4g} in {local['refined']['nfev']} simulations"] if local.get("refined") else []))
     hist = np.concatenate([[f0], np.asarray(res.history_f, float) if res is not None else [], [f]])
     out = IdentificationResult(
-        problem, np.asarray(x0, float), f0, _safe_H(problem, x0), x, f, _safe_H(problem, x), nfev,
+        problem, np.asarray(x0, float), f0, safe_nrmsd(problem, x0), x, f, safe_nrmsd(problem, x), nfev,
         nfev - (res.replayed if res is not None else 0), res.replayed if res is not None else 0, message, hist,
         time.time() - t0, iterations=res.iterations if res is not None else None,
         nfev_total=nfev + ((res.nfev_total - res.nfev) if res is not None else 0),

@@ -26,7 +26,7 @@ class _TwoValleys:
 
 
 def _descend(problem, x, f, refine_evals, uncertainty, journal):
-    """identify._local's stand-in: to the floor of the valley x starts in; intervals if asked."""
+    """identify.local_stage's stand-in: to the floor of the valley x starts in; intervals if asked."""
     x = np.array(x, float)
     x[3] = 0.203 if abs(x[3] - 0.203) < abs(x[3] - 0.241) else 0.241
     out = {"refined": {"f_start": f, "f": problem(x), "nfev": 7, "iterations": 2}}
@@ -43,7 +43,7 @@ def _ivs(x, identifiable=(True, False, True, True, True)):
 
 @pytest.fixture
 def stand_in(monkeypatch):
-    monkeypatch.setattr(identify_mod, "_local", _descend)
+    monkeypatch.setattr(identify_mod, "local_stage", _descend)
     return _TwoValleys()
 
 
