@@ -78,3 +78,42 @@ def test_report_current_only_counts_the_current_rows(tmp_path, capsys):
     bench.main(["report", "--results", str(tmp_path), "--current-only"])
     out = capsys.readouterr().out
     assert "2 of 3 rows of the current code" in out and "left out of the counts" in out and '"records": 2' in out
+
+
+def _effect(fam: str, ia: int, found: list, outcome: str = "confirmed", k: int = 0) -> dict:
+    return {"id": f"{fam}_{ia}_{k}", "kind": "effect", "family": fam, "amp_index": ia, "found": found,
+            "outcome": outcome, "cpu_s": 2.0}
+
+
+def test_summarise_counts_hits_wrong_effects_and_the_90_percent_amplitude():
+    """The rates: a hit is the family's effect confirmed first (the sensor families count 'sensor'),
+    another effect confirmed is a wrong one, an errored row counts nowhere; the smallest amplitude
+    found in >= 90 % needs at least 5 records; clean rows with anything confirmed are false alarms."""
+    rows = [{"id": "c0", "kind": "clean", "source": "synthetic", "found": [], "outcome": "nothing significant",
+             "cpu_s": 1.0},
+            {"id": "c1", "kind": "clean", "source": "rig", "found": ["mass"], "outcome": "confirmed",
+             "protocol": "start-stop", "layout": 1, "cpu_s": 3.0},
+            {"id": "c2", "kind": "clean", "source": "rig", "found": [], "error": "failed", "cpu_s": 1.0}]
+    # mass, amplitude index 1: 5 records, 5 hits; index 0: 4 of 4 (too few to count); index 2: 4 of 5
+    rows += [_effect("mass", 1, ["mass"], k=k) for k in range(5)]
+    rows += [_effect("mass", 0, ["mass"], k=k) for k in range(4)]
+    rows += [_effect("mass", 2, ["mass"], k=k) for k in range(4)] + [_effect("mass", 2, ["motor_ripple"], k=4)]
+    rows += [_effect("sensor_gain", 3, ["sensor"], k=k) for k in range(5)]
+    rows += [_effect("sensor_gain", 2, [], "nothing significant", k=k) for k in range(5)]
+    rows += [{"id": "o0", "kind": "ooc", "artefact": "crosstalk", "found": [], "outcome": "not in the catalogue",
+              "cpu_s": 1.0}]
+    s = bench.summarise(rows)
+    assert s["clean"]["records"] == 2 and s["clean"]["false_confirmations"] == ["c1"]
+    assert s["clean"]["by_source"] == {"synthetic": 1, "rig": 1} and s["errors"] == ["c2"]
+    mass = {r["amplitude"]: r for r in s["detection"]["mass"]["rows"]}
+    amps = bench.FAMILIES["mass"][1]
+    assert mass[amps[1]]["rate"] == 1.0 and mass[amps[0]]["records"] == 4
+    assert mass[amps[2]]["found"] == 4 and mass[amps[2]]["wrong_effect"] == 1 and mass[amps[2]]["rate"] == 0.8
+    assert s["detection"]["mass"]["smallest_90"] == amps[1]          # not amps[0]: only 4 records there
+    gain = s["detection"]["sensor_gain"]
+    assert gain["smallest_90"] == bench.FAMILIES["sensor_gain"][1][3]
+    assert {r["amplitude"]: r["outcomes"]["nothing significant"] for r in gain["rows"]}[
+        bench.FAMILIES["sensor_gain"][1][2]] == 5
+    assert s["out_of_catalogue"]["crosstalk"] == {"records": 1, "not_in_catalogue": 1, "confirmed": 0, "nothing": 0}
+    assert s["detection"]["track_bump"]["smallest_90"] is None       # no record: no threshold
+    assert s["cpu_s"]["total"] == pytest.approx(sum(r["cpu_s"] for r in rows))
