@@ -38,6 +38,7 @@ def release_problem(fmu_file):
     return make()
 
 
+@pytest.mark.slow   # make test: the default pipeline's recovery, tests/test_front_door.py
 def test_recovery_from_the_release_transient(release_problem):
     """Complex-RF with restarts (identify(restarts=...)) recovers e_JA, e_SW and
     e_RW within +-0.03 and drives f to the noise floor f(truth); e_JR is below

@@ -98,7 +98,7 @@ def test_lss_identify_takes_further_records(records, tmp_path):
     import subprocess
     import sys
     settings = tmp_path / "quick.toml"
-    settings.write_text('[identify]\nwindow = 0.6\nfree = ["e_JA", "e_SW", "s_M"]\nmax_evals = 8\n'
+    settings.write_text('[identify]\nwindow = 0.4\nfirst_window = 0.4\nfree = ["e_JA", "e_SW", "s_M"]\nmax_evals = 8\n'
                         'refine_evals = 0\nrestarts = 0\nshrink = false\nstart = "complex"\n')
     out = tmp_path / "joint"
     cp = subprocess.run([sys.executable, "-m", "lss_app.cli", "identify", str(records[0].path),
@@ -108,6 +108,6 @@ def test_lss_identify_takes_further_records(records, tmp_path):
     res = json.loads((out / "result.json").read_text())
     assert res["free"] == ["contact.e_JA", "contact.e_SW", TRIGGER, f"{TRIGGER}@1"]
     assert "s_M@1" in res["values"] and res["measurement"].endswith("(+1 records)")
-    assert res["method"] == "grown" and res["settings"]["max_evals"] == 8 and res["settings"]["window"] == 0.6
+    assert res["method"] == "grown" and res["settings"]["max_evals"] == 8 and res["settings"]["window"] == 0.4
     assert res["settings"]["free"] == ["e_JA", "e_SW", "s_M"] and len(res["records"]) == 2
     assert (out / "forces.png").is_file()
