@@ -16,12 +16,10 @@ meta.json, before the windows grow (growing.grow, `reset_unseen`).
 
 `identify_grown` wraps that into an IdentificationResult: the refinement and
 the intervals on the whole record after growing, and, with `shrink`, the
-window chosen as `windowing.identify_windowed` chooses it (while a CoR is
+window chosen by the shrink stage (identification.windowing: while a CoR is
 rough or the fit above the declared noise, the next shorter window of
-LADDER), but taken up from the grown trail's own point at that length rather
-than from the full window's: past the onset of chaos the trail may already
-have been carried off, and the point before it has not. Nothing of the
-truth is used.
+LADDER, taken up from the grown trail's own point at that length). Nothing
+of the truth is used.
 """
 from __future__ import annotations
 
@@ -37,7 +35,7 @@ from .growing import FIRST, grow, records_off
 from .joint import JointProblem
 from .joint_start import single_start
 from .problem import LINEARISABLE
-from .windowing import LADDER, troubles, truncated
+from .windowing import LADDER, shrink_window, truncated
 
 log = logging.getLogger(__name__)
 
@@ -215,7 +213,7 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
                                safe_nrmsd(problem, x), nfev, nfev, 0, message, np.array([f0, f]), time.time() - t0,
                                refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
     if shrink:
-        res = _shrunk(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
+        res = shrink_window(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
     return _from_edges(res, int(refine_evals), journal)
 
 
@@ -238,41 +236,6 @@ def _from_edges(res, refine_evals, journal):
     return dataclasses.replace(res, x=np.asarray(x, float), f=float(f), H=safe_nrmsd(q, x), intervals=ivs,
                                nfev=res.nfev + extra, evaluated=res.evaluated + extra, message=message,
                                history_f=np.append(res.history_f, f))
-
-
-def _shrunk(problem, res, trail, ladder, refine_evals, journal, t0):
-    """`res`, or the first shorter window of `ladder` without troubles (else
-    the shortest), each refined from the trail's point at the longest grown
-    window not beyond it."""
-    from .identify import local_stage, safe_nrmsd
-    full = float(problem.times[-1])
-    tried = [{"window_s": full, "f": float(res.f), "troubles": troubles(res), "seconds": float(res.seconds)}]
-    steps = [s for s in sorted({float(s) for s in ladder}, reverse=True) if s < full - 1e-9]
-    start_t = float(problem.times[0])
-    for s in steps:
-        if not tried[-1]["troubles"]:
-            break
-        t1 = time.time()
-        below = [t for t in trail if start_t + t["window_s"] <= s + 1e-9] or trail[:1]
-        x_start = np.asarray(below[-1]["x"], float)
-        q = truncated(problem, s)
-        jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{s:g}.jsonl")
-        f_start = float(q(x_start))
-        local = local_stage(q, x_start, f_start, refine_evals, True, jr)
-        x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f_start \
-            else (x_start, f_start)
-        extra = int((local.get("refined") or {}).get("nfev", 0)) + 1
-        res = dataclasses.replace(res, problem=q, x=x, f=f, H=safe_nrmsd(q, x), f0=float(q(res.x0)),
-                                  H0=safe_nrmsd(q, res.x0), nfev=res.nfev + extra, evaluated=res.evaluated + extra,
-                                  refined=local.get("refined"), intervals=local.get("intervals"),
-                                  history_f=np.append(res.history_f, f))
-        tried.append({"window_s": float(q.times[-1]), "f": f, "troubles": troubles(res),
-                      "seconds": time.time() - t1, "from_window_s": float(below[-1]["window_s"])})
-        log.info("%s: window %.3g s from the grown point at %.3g s, f = %.4g%s", problem.name, s,
-                 below[-1]["window_s"], f, f" ({', '.join(tried[-1]['troubles'])})" if tried[-1]["troubles"] else "")
-    sizes = ", ".join(f"{t['window_s']:g}" for t in tried)
-    return dataclasses.replace(res, windows=tried, seconds=time.time() - t0,
-                               message=res.message + (f"; windows {sizes} s" if len(tried) > 1 else ""))
 
 
 __all__ = ["identify_grown"]

@@ -87,6 +87,8 @@ def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
     values = first_part.values(np.asarray(fits[-1]["x"], float))
     triggers, nfev = [], int(info["nfev"])
     for k, part in enumerate(problem.parts[1:], start=1):
+        if TRIGGER not in part.free:   # a trigger point held at its value has nothing to search
+            continue
         s, S, used = trigger_scan(part, values, w[k * n:(k + 1) * n], first)
         values[own(k)] = s
         triggers.append({"record": k, "trigger": s, "S_per_sample": S})

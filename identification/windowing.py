@@ -1,33 +1,36 @@
-"""Shorter windows for records that turn chaotic (issue 17).
+"""Shorter windows for records that turn chaotic: the shrink stage.
 
 A record from rest carries the CoRs while the chain's response is a smooth
-function of them. On some layouts (layout 5 of the recovery set) the
-steering wheels start bouncing in the guide within the first two seconds,
-above all once the drive brakes: from there the forces depend on the CoRs
-chaotically, the objective is rough, the complex stops in a wrong basin and
+function of them. On some layouts the steering wheels start bouncing in the
+guide within the first two seconds, above all once the drive brakes: from
+there the forces depend on the CoRs chaotically, the objective is rough and
 the roughness check (uncertainty.intervals: forward and backward differences
 disagree) calls the CoRs not identifiable. The first second of the same
 record is still smooth (the Cramer-Rao computation of
-benchmarks/bench_information.py: all six of layout 5's start-stops at 1.0 s,
-benchmarks/results/information_window1.0.json).
+benchmarks/bench_information.py, benchmarks/results/information_window1.0.json).
 
-`identify_windowed` identifies at the record's window first; when a CoR is
-rough at the optimum, or a likelihood fit stays above the declared noise, it
-cuts the record to the next window of `ladder` and identifies again from the
-optimum it has, until every CoR is smooth and the fit at the noise. Nothing
-of the truth is used: the test is the one the intervals report anyway. The
-result says which windows were tried (`windows`) and its problem is the cut
-one (result.json `window_s`).
+The rule, for every record: while a CoR is rough at the optimum or a
+likelihood fit stays above the declared noise (`troubles`), the next shorter
+window of `LADDER` is fitted, refined from the grown trail's own point at
+that length (`shrink_window`): past the onset of chaos the trail may have
+been carried off, the point before it has not. Nothing of the truth is used;
+the result says which windows were tried (`windows`) and its problem is the
+cut one (result.json `window_s`).
 """
 from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Callable, Sequence
+import time
+from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from lss_fmu.design import CORS
+
+from .identify import local_stage, safe_nrmsd
+from .joint import JointProblem
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +40,6 @@ LADDER = (1.5, 1.2, 1.0)   # s, tried in turn below the record's own window (lay
 def truncated(problem, seconds: float):
     """The problem on the record's first `seconds` (an IdentificationProblem,
     or a joint problem cut record by record); the same FMU instance."""
-    from .joint import JointProblem
     if isinstance(problem, JointProblem):
         parts = [truncated(p, seconds) for p in problem.parts]
         return JointProblem(parts, free=problem.free, x0=problem.x0, name=problem.name)
@@ -61,49 +63,38 @@ def troubles(result, names: Sequence[str] = CORS) -> list:
     return out
 
 
-def identify_windowed(problem, run: Callable, ladder: Sequence[float] = LADDER, **kw):
-    """run(problem, **kw) (identify, or staged.run with its flag bound), then
-    on ever shorter windows of `ladder` (only those below the record's own)
-    while `troubles` reports any; each later run starts from the optimum of
-    the one before. Returns the first result without troubles, else the
-    shortest window's; `windows` lists every window tried with its f and
-    troubles. Needs `uncertainty=True` (the roughness check)."""
-    if not kw.get("uncertainty"):
-        raise ValueError("identify_windowed needs uncertainty=True: the roughness of the CoRs decides the window")
+def shrink_window(problem, res, trail, ladder, refine_evals, journal, t0):
+    """`res`, or the first shorter window of `ladder` without troubles (else
+    the shortest), each refined from the trail's point at the longest grown
+    window not beyond it."""
     full = float(problem.times[-1])
-    steps = [w for w in sorted(set(float(w) for w in ladder), reverse=True) if w < full - 1e-9]
-    journal = kw.pop("journal", None)
-    tried, current, res = [], problem, None
-    for w in [None] + steps:
-        if w is not None:
-            current = _starting(truncated(problem, w), res.problem.values(res.x))
-        jr = None if journal is None else (journal if w is None else _suffix(journal, f".w{w:g}"))
-        res = run(current, journal=jr, **kw)
-        why = troubles(res)
-        tried.append({"window_s": float(current.times[-1]), "f": float(res.f), "troubles": why,
-                      "seconds": float(res.seconds)})
-        log.info("%s: window %.3g s, f = %.4g%s", problem.name, current.times[-1], res.f,
-                 f" ({', '.join(why)})" if why else "")
-        if not why:
+    tried = [{"window_s": full, "f": float(res.f), "troubles": troubles(res), "seconds": float(res.seconds)}]
+    steps = [s for s in sorted({float(s) for s in ladder}, reverse=True) if s < full - 1e-9]
+    start_t = float(problem.times[0])
+    for s in steps:
+        if not tried[-1]["troubles"]:
             break
+        t1 = time.time()
+        below = [t for t in trail if start_t + t["window_s"] <= s + 1e-9] or trail[:1]
+        x_start = np.asarray(below[-1]["x"], float)
+        q = truncated(problem, s)
+        jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{s:g}.jsonl")
+        f_start = float(q(x_start))
+        local = local_stage(q, x_start, f_start, refine_evals, True, jr)
+        x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f_start \
+            else (x_start, f_start)
+        extra = int((local.get("refined") or {}).get("nfev", 0)) + 1
+        res = dataclasses.replace(res, problem=q, x=x, f=f, H=safe_nrmsd(q, x), f0=float(q(res.x0)),
+                                  H0=safe_nrmsd(q, res.x0), nfev=res.nfev + extra, evaluated=res.evaluated + extra,
+                                  refined=local.get("refined"), intervals=local.get("intervals"),
+                                  history_f=np.append(res.history_f, f))
+        tried.append({"window_s": float(q.times[-1]), "f": f, "troubles": troubles(res),
+                      "seconds": time.time() - t1, "from_window_s": float(below[-1]["window_s"])})
+        log.info("%s: window %.3g s from the grown point at %.3g s, f = %.4g%s", problem.name, s,
+                 below[-1]["window_s"], f, f" ({', '.join(tried[-1]['troubles'])})" if tried[-1]["troubles"] else "")
     sizes = ", ".join(f"{t['window_s']:g}" for t in tried)
-    return dataclasses.replace(res, windows=tried,
+    return dataclasses.replace(res, windows=tried, seconds=time.time() - t0,
                                message=res.message + (f"; windows {sizes} s" if len(tried) > 1 else ""))
 
 
-def _starting(problem, values: dict):
-    """The problem started at `values` (design name -> value; a joint problem's
-    trigger.s_M@k too)."""
-    from .joint import JointProblem
-    if isinstance(problem, JointProblem):
-        return JointProblem(problem.parts, free=problem.free, x0=values, name=problem.name)
-    return dataclasses.replace(problem, x0={**(problem.x0 or {}), **values})
-
-
-def _suffix(path, tag: str):
-    from pathlib import Path
-    p = Path(path)
-    return p.with_name(p.stem + tag + p.suffix)
-
-
-__all__ = ["identify_windowed", "truncated", "troubles", "LADDER"]
+__all__ = ["shrink_window", "truncated", "troubles", "LADDER"]

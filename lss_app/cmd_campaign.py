@@ -1,44 +1,27 @@
-"""`lss campaign` (every measurement x every contact model, locally or on a
-Dask cluster, resumable) and `lss report` (the paper's section 4 from it)."""
+"""`lss campaign` (every sorter x every contact model through the front door,
+locally or on a Dask cluster, resumable) and `lss report` (the paper's section 4 from it)."""
 from __future__ import annotations
 
 from pathlib import Path
 
 
 def register(sub, common) -> None:
-    ap = sub.add_parser("campaign", parents=[common], help="identify all measurements x models",
-                        description="The campaign: every measurement x every contact model, in parallel.")
-    ap.add_argument("data_dir")
-    ap.add_argument("--models", default="HC,HW,LW,LN")
-    ap.add_argument("--out", required=True)
+    ap = sub.add_parser("campaign", parents=[common], help="identify many sorters x contact models",
+                        description="Every sorter x every contact model through the pipeline of `lss identify` "
+                                    "(the same defaults), locally or on a Dask cluster, resumable. Measurement "
+                                    "folders of one name under the DATA folders are the records of one sorter, "
+                                    "fitted jointly; or a manifest names them.")
+    ap.add_argument("data_dirs", nargs="*", metavar="DATA", help="folders of measurements (mNN/ with meta.json)")
+    ap.add_argument("--models", default="HC,HW,LW,LN", help="contact models, comma-separated (default: the "
+                    "paper's four)")
+    ap.add_argument("--out", required=True, help="campaign folder; run again after an interruption, it resumes")
+    ap.add_argument("--manifest", default=None, metavar="TOML",
+                    help="a [sorters] table of name = [record folders] instead of DATA")
+    ap.add_argument("--settings", default=None, metavar="TOML",
+                    help="an expert's settings file, table [identify] (as lss identify)")
     ap.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
     ap.add_argument("--workers", type=int, default=2, help="local processes (without --scheduler)")
-    ap.add_argument("--max-evals", type=int, default=5000)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--window", type=float, default=None, help="use only the first seconds of each record")
-    ap.add_argument("--settle", type=float, default=None,
-                    help="run-in before the photocell is armed, s (default: the record's protocol's)")
-    ap.add_argument("--free", default=None, help="design variables to identify (default: all ten)")
-    ap.add_argument("--restarts", type=int, default=0,
-                    help="restart a converged complex around the best point up to N times (0: as published)")
-    ap.add_argument("--objective", default="pointwise", choices=("pointwise", "statistics", "likelihood"),
-                    help="pointwise: Eq. 10-12 (default); statistics: spectra and amplitude distributions; "
-                         "likelihood: the residual over the declared noise")
-    ap.add_argument("--presolve", type=int, default=0,
-                    help="evaluations of a first complex with only the layout-dependent variables free (0: none)")
-    ap.add_argument("--refine-evals", type=int, default=0,
-                    help="simulations of the local refinement after the complex (0: none)")
-    ap.add_argument("--staged", action="store_true",
-                    help="the layout-dependent variables by Levenberg-Marquardt first, the complex on the CoRs, "
-                         "then Levenberg-Marquardt on everything (identification.staged)")
-    ap.add_argument("--grown", action="store_true",
-                    help="the complex on the record's first 0.3 s (--max-evals), then Levenberg-Marquardt over "
-                         "windows growing to the whole record (identification.identify_grown)")
-    ap.add_argument("--shrink", action="store_true",
-                    help="when a CoR is rough at the optimum (a record that turns chaotic) or the fit stays above "
-                         "the noise, identify again on the first 1.5, 1.2, 1.0 s (identification.windowing)")
-    ap.add_argument("--tare", action="store_true",
-                    help="take out zero errors within 3 sigma of the transducer's declared offset")
     ap.add_argument("--no-progress", action="store_true")
     ap.set_defaults(run=run_campaign)
 
@@ -48,16 +31,14 @@ def register(sub, common) -> None:
 
 
 def run_campaign(args) -> int:
-    from identification.campaign import run_campaign as campaign
-    from lss_fmu.design import parse_free, parse_model
-    models = [parse_model(m) for m in args.models.split(",") if m.strip()]
-    free = parse_free(args.free) if args.free else None
-    results = campaign(Path(args.data_dir), models, Path(args.out), workers=args.workers,
-                       scheduler=args.scheduler, max_evals=args.max_evals, seed=args.seed,
-                       window=args.window, settle=args.settle, free=free, progress=not args.no_progress,
-                       tare=args.tare, restarts=args.restarts, presolve=args.presolve,
-                       refine_evals=args.refine_evals, uncertainty=True, objective=args.objective,
-                       staged=args.staged, shrink=args.shrink, grown=args.grown)
+    from identification.campaign import CampaignError, run_campaign as campaign
+    from identification.settings import load_settings
+    if not args.data_dirs and args.manifest is None:
+        raise CampaignError("give DATA folders or --manifest")
+    models = [m for m in args.models.split(",") if m.strip()]
+    results = campaign([Path(d) for d in args.data_dirs], models, Path(args.out),
+                       settings=load_settings(args.settings), manifest=args.manifest, workers=args.workers,
+                       scheduler=args.scheduler, seed=args.seed, progress=not args.no_progress)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

@@ -16,10 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import identification.identify_grown as ig
+import identification.windowing as windowing
 from identification.identify_grown import identify_grown
 from identification.problem import drive_known, from_measurement
-from identification.staged import run
 from lss_fmu.rig import load_truth, true_design_values
 
 WINDOW = 1.5
@@ -71,9 +70,9 @@ def test_a_shorter_window_starts_from_the_grown_point_at_its_length(start_stop_l
     meas = start_stop_layout1
     truth = true_design_values(load_truth(meas))
     p = drive_known(from_measurement(meas, "LW", window=WINDOW, tare=True, objective="likelihood"), truth)
-    monkeypatch.setattr(ig, "troubles", lambda res: ["forced"] if res.problem.times[-1] > 1.1 else [])
+    monkeypatch.setattr(windowing, "troubles", lambda res: ["forced"] if res.problem.times[-1] > 1.1 else [])
     try:
-        res = run(p, False, True, True, max_evals=30, refine_evals=5, uncertainty=True, seed=1)
+        res = identify_grown(p, shrink=True, max_evals=30, refine_evals=5, uncertainty=True, seed=1)
     finally:
         p.sim.close()
     tried = res.windows
@@ -98,8 +97,6 @@ def test_grown_refuses_what_it_cannot_do(start_stop_layout1):
             identify_grown(p, max_evals=0)
         with pytest.raises(ValueError, match="needs uncertainty=True"):
             identify_grown(p, max_evals=10, shrink=True)
-        with pytest.raises(ValueError, match="staged or grown, not both"):
-            run(p, True, False, True, max_evals=10)
         with pytest.raises(ValueError, match="start 'first' is not one of complex, single, auto"):
             identify_grown(p, max_evals=10, start="first")
     finally:
