@@ -2,17 +2,14 @@
 """The whole field set through the campaign (issue 6): wall time, evaluations,
 and whether the paper's section-4 verdict comes out.
 
-22 measurements x the contact models, each identified separately with
-Complex-RF (all ten design variables free), on local worker processes, then
-`lss report`. The field set's truth is the GZ law, which none of the
-candidates is (docs/measurements.md), as for a real sorter. The transducer's
-zero errors within its declared offset are taken out (`--tare`; the offsets
-of the field set's transducer, 6-15 N, are of the order of the lateral and
-steering forces' range in steady running and would otherwise weigh the same
-on every model); `--no-tare` keeps Eq. 10-12 as they are.
+22 measurements x the contact models through `lss campaign`'s pipeline (the
+front door's method for the records: the force statistics for the field
+set's steady running, all ten design variables free), on local worker
+processes, then `lss report`. The field set's truth is the GZ law, which none
+of the candidates is (docs/measurements.md), as for a real sorter. An
+expert's settings file changes the pipeline (`--settings`, as lss campaign).
 
-    .venv/bin/python benchmarks/bench_field_campaign.py --max-evals 24 --window 1 --settle 2 \\
-        --json benchmarks/results/field_campaign.json
+    .venv/bin/python benchmarks/bench_field_campaign.py --json benchmarks/results/field_campaign.json
 
 The measurements are made once with a shortened record (--lap-seconds) and
 reused; the campaign writes every result atomically and journals every
@@ -33,12 +30,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from identification.campaign import run_campaign  # noqa: E402
+from identification.settings import load_settings  # noqa: E402
 from identification.stats import load_results, model_tests  # noqa: E402
 from lss_app.campaign_report import write_report  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.rig import generate_set  # noqa: E402
 
-PAPER_EVALS = 5000
 
 
 def _cpu() -> float:
@@ -57,11 +54,8 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default="build/bench_field_campaign")
     ap.add_argument("--models", default="HC,HW,LW,LN")
     ap.add_argument("--lap-seconds", type=float, default=2.0)
-    ap.add_argument("--window", type=float, default=1.0)
-    ap.add_argument("--settle", type=float, default=2.0)
-    ap.add_argument("--max-evals", type=int, default=24)
+    ap.add_argument("--settings", default=None, help="an expert's settings file (identification.settings)")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--no-tare", action="store_true", help="the paper's objective as is, offsets included")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
@@ -71,11 +65,11 @@ def main(argv=None) -> int:
         generate_set("field", data, None, workers=args.workers, lap_seconds=args.lap_seconds, progress=False)
     models = [m for m in args.models.split(",") if m]
     old = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).is_file() else {}
-    sessions = old.get("sessions", []) if old.get("settings", {}).get("max_evals") == args.max_evals else []
+    settings = load_settings(args.settings)
+    sessions = old.get("sessions", []) if old.get("identify") == settings.to_dict() else []
     before = _journaled(out)
     w0, c0 = time.perf_counter(), _cpu()
-    results = run_campaign(data, models, out, workers=args.workers, max_evals=args.max_evals,
-                           window=args.window, settle=args.settle, progress=True, tare=not args.no_tare)
+    results = run_campaign([data], models, out, settings=settings, workers=args.workers, progress=True)
     wall, cpu = time.perf_counter() - w0, _cpu() - c0
     done_now = _journaled(out) - before
     report = write_report(out)
@@ -89,10 +83,9 @@ def main(argv=None) -> int:
         per_model[m] = {"n": int(f.size), "f_median": float(med), "f_iqr": float(q3 - q1),
                         "f_min": float(f.min()), "f_max": float(f.max())}
     summary = {
-        "settings": {"models": models, "max_evals": args.max_evals, "window_s": args.window,
-                     "settle_s": args.settle, "lap_seconds": args.lap_seconds, "workers": args.workers,
-                     "tare": not args.no_tare,
-                     "measurements": len({r["measurement"] for r in results})},
+        "settings": {"models": models, "lap_seconds": args.lap_seconds, "workers": args.workers,
+                     "measurements": len({r["sorter"] for r in results})},
+        "identify": settings.to_dict(),
         "sessions": sessions + [{"wall_s": wall, "cpu_s": cpu, "evaluations": done_now}],
         "evaluations": {"median": float(np.median(nfev)), "min": int(nfev.min()), "max": int(nfev.max())},
         "per_model": per_model, "tests": tests, "report": str(report),

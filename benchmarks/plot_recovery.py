@@ -7,7 +7,7 @@ the issue's +-0.03 (issue 17).
 
 A filled dot is within 0.03 with its interval claimed; a hollow one is
 reported not identifiable (no interval); red marks a measurement where any
-of the three misses. Every table in the file (one per protocol label) is
+of the three misses (off by more, or not claimed). Every table in the file (one per protocol label) is
 drawn, one row of panels each.
 """
 from __future__ import annotations
@@ -23,7 +23,8 @@ CLIP = 0.2   # errors beyond this are drawn at the edge (a failure's CoRs can be
 
 
 def hit(row: dict) -> bool:
-    return all(abs(row[c]["error"]) <= TOL for c in CORS)
+    """All three claimed (not reported unidentifiable) and within TOL of the truth."""
+    return all(row[c].get("identifiable") is not False and abs(row[c]["error"]) <= TOL for c in CORS)
 
 
 def figure(tables: dict, path: Path) -> None:
@@ -73,7 +74,11 @@ def main(argv=None) -> int:
     src = Path(args.results)
     try:
         report = json.loads(src.read_text())
-        tables = {label: entry["rows"] for label, entry in report["protocols"].items() if entry.get("rows")}
+        if "protocols" in report:   # the tables of several pipelines, by label
+            tables = {label: entry["rows"] for label, entry in report["protocols"].items() if entry.get("rows")}
+        else:   # one campaign's table
+            label = f"{report['protocol']}, {report['repeats']} records"
+            tables = {label: report["rows"]} if report["rows"] else {}
     except (OSError, ValueError, KeyError, TypeError) as exc:
         print(f"{src}: not a bench_recovery result file ({exc})", file=sys.stderr)
         return 2

@@ -651,11 +651,12 @@ def _work(set_name, number, out, seed, lap_seconds, fmu_sha, overwrite, fx=((), 
 
 
 def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
-              fx: tuple = ((), None, (), "steady", 0)) -> Optional[str]:
+              fx: tuple = ((), None, (), "steady", 0), lap_seconds: Optional[float] = None) -> Optional[str]:
     """None if measurement `number` is not in `out`; "" if it is there and is what
     this run would make (same set, seed, FMU, parameters, undeclared effects and
-    artefacts, protocol, repeat, full lap); otherwise the reason why it differs. `fx`:
-    (effects, effect_seed, artefacts, protocol[, repeat]) of this run."""
+    artefacts, protocol, repeat, record length: the full one, or the samples of
+    `lap_seconds`); otherwise the reason why it differs. `fx`: (effects,
+    effect_seed, artefacts, protocol[, repeat]) of this run."""
     folder, truth = out / folder_name(number), answers_dir(out) / folder_name(number) / "truth.json"
     if not (folder / M.META_FILE).is_file() or not truth.is_file():
         return None
@@ -665,8 +666,13 @@ def _existing(out: Path, number: int, set_name: str, seed: int, sha: str,
         return f"its answer file cannot be read ({exc})"
     if t.get("set") != set_name or t.get("seed") != seed:
         return f"it is from set '{t.get('set')}', seed {t.get('seed')}"
-    if not t.get("full_lap", False):
+    if lap_seconds is None and not t.get("full_lap", False):
         return "it is a shortened run (--lap-seconds)"
+    if lap_seconds is not None:
+        want = int(round(float(lap_seconds) * SensorModel().sample_rate))
+        if t.get("full_lap", False) or t.get("n_samples") != want:
+            return (f"it is {t.get('n_samples')} samples long{' (full)' if t.get('full_lap') else ''}, not the "
+                    f"{want} of --lap-seconds {float(lap_seconds):g}")
     if t.get("fmu_sha256") != sha:
         return f"it was made with another FMU (sha256 {str(t.get('fmu_sha256'))[:12]}...)"
     # with the answers folder: the field set's as-built track (rewritten, the same file) is what the
@@ -748,12 +754,12 @@ def generate_set(set_name: str, out: Union[str, Path], numbers: Optional[Sequenc
     todo, results = [], []
     stale = {}
     for n in ALL_NUMBERS:
-        state = _existing(out, n, set_name, seed, sha, fx)
+        state = _existing(out, n, set_name, seed, sha, fx, lap_seconds)
         if state:
             stale[n] = state
         if n not in numbers:
             continue
-        if state == "" and not overwrite and lap_seconds is None:
+        if state == "" and not overwrite:
             results.append({"number": n, "layout": NUMBERING[n], "skipped": "already generated"})
             continue
         todo.append(n)

@@ -19,9 +19,17 @@ def _row(n, errors, identifiable=True):
     return row
 
 
-def test_a_hit_needs_all_three_within_the_tolerance():
+def test_a_hit_needs_all_three_claimed_and_within_the_tolerance():
     assert hit(_row(1, (0.0, -0.03, 0.029)))
     assert not hit(_row(2, (0.0, 0.0, 0.031)))
+    assert not hit(_row(3, (0.0, 0.0, 0.01), identifiable=False))   # a value reported unidentifiable is no hit
+
+
+def test_the_figure_of_one_campaign_table(tmp_path):
+    src = tmp_path / "r.json"
+    src.write_text(json.dumps({"protocol": "start-stop", "repeats": 3, "rows": [_row(1, (0.01, 0.0, -0.02))]}))
+    out = tmp_path / "fig.png"
+    assert main([str(src), "--out", str(out)]) == 0 and out.stat().st_size > 10_000
 
 
 def test_the_figure_is_drawn_from_a_result_file(tmp_path):

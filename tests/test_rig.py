@@ -142,6 +142,10 @@ def test_small_recovery_run_is_loadable(tmp_path, capsys):
     t = json.loads(tfile.read_text())
     sha = t["fmu_sha256"]
     assert rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha) == "it is a shortened run (--lap-seconds)"
+    # a shortened run of the length asked again is the same run; of another length it is not
+    assert rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha, lap_seconds=1.5) == ""
+    assert rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha, lap_seconds=1.0) == \
+        "it is 450 samples long, not the 300 of --lap-seconds 1"
     t["full_lap"] = True
     tfile.write_text(json.dumps(t))
     assert rig._existing(out, 20, "recovery", rig.DEFAULT_SEED, sha) == ""
