@@ -25,9 +25,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from identification.close_loop import close_loop  # noqa: E402
+from identification.loop.close_loop import close_loop  # noqa: E402
 from lss_app.close_loop_report import write_report  # noqa: E402
-from identification.problem import from_measurement  # noqa: E402
+from identification.objective.problem import from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
 from lss_fmu.rig import folder_name, generate_set, load_truth, parse_numbers  # noqa: E402

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """False alarms and detection rates of the closed loop (issue 18, item 3).
 
-Runs `identification.close_loop` on records with a known truth and counts
+Runs `identification.loop.close_loop` on records with a known truth and counts
 what it concludes:
 
 * clean records (no effect): synthetic release transients of layout 7 (noise
@@ -60,7 +60,7 @@ SUMMARY = ROOT / "benchmarks" / "results" / "close_loop_rates.json"
 
 # the loop's budgets for the benchmark (small: records of 1 s)
 BUDGET = dict(base_evals=80, max_evals=100, fit_evals=20, refine_evals=40, base_refine_evals=60, test_max=4, rounds=1,
-              first_window=0.3)   # s, the base's first window (identification.growing); 0: the whole record
+              first_window=0.3)   # s, the base's first window (identification.pipeline.growing); 0: the whole record
 CARTS = (0, 7, 13, 20, 26, 33, 39, 46)   # transducer carts of the release transient: in curves and on straights
 
 # family -> (unit, amplitudes, what the amplitude is)
@@ -121,7 +121,7 @@ def _moving_channels(problem, x) -> list:
 
 def synthetic_problem(case: dict):
     """(problem, truth dict) of a synthetic case."""
-    from identification.synthetic import (LAYOUT, TRUTH, cart_trigger, make_problem, transducer_before)
+    from identification.loop.synthetic import (LAYOUT, TRUTH, cart_trigger, make_problem, transducer_before)
     from lss_fmu.layouts import load_track
     from lss_fmu.runner import LazySimulator
     from lss_fmu.sensor import OFFSET_STD
@@ -189,7 +189,7 @@ def synthetic_problem(case: dict):
 def rig_problem(case: dict):
     """(problem, truth, close_loop keywords) of a rig record: made once into WORK (2 s logged), read back
     with its window as `lss close-loop` does."""
-    from identification.problem import from_measurement
+    from identification.objective.problem import from_measurement
     from lss_fmu.measurement import load_measurement
     from lss_fmu.rig import folder_name, generate_set, load_truth
     data = WORK / f"rig_{case['protocol']}_m{case['number']:02d}"   # one folder each: a set folder holds one kind of run
@@ -207,7 +207,7 @@ def rig_problem(case: dict):
 
 
 def run_case(case: dict, budget: dict = BUDGET) -> dict:
-    from identification.close_loop import close_loop
+    from identification.loop.close_loop import close_loop
     t0, c0 = time.time(), time.process_time()
     if case.get("source") == "rig":
         problem, truth, kw = rig_problem(case)

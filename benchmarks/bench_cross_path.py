@@ -15,7 +15,7 @@ configuration fits the same data. The cases:
 
 - `identify_mNN`: the recovery set's start-stop record NN (lss rig), its first
   1.5 s, LW, the ten design variables free, the recovery table's pipeline
-  (identification.identify_grown: complex on the first window, likelihood,
+  (identification.pipeline.identify_grown: complex on the first window, likelihood,
   tare, start auto, one restart, shrinking, refinement, intervals);
 - `pointwise_release`: for comparison, the paper's pointwise objective (not
   the default) on the release transient's first 0.6 s, four CoRs free,
@@ -113,8 +113,8 @@ def path_used(path: int) -> int:
 
 
 def run_identify(case: dict, path: int) -> dict:
-    from identification.identify_grown import identify_grown
-    from identification.problem import from_measurement
+    from identification.pipeline.identify_grown import identify_grown
+    from identification.objective.problem import from_measurement
     from lss_fmu.measurement import load_measurement
     from lss_fmu.rig import load_truth, true_design_values
     meas = load_measurement(record_dir(case["number"]))
@@ -132,10 +132,10 @@ def run_identify(case: dict, path: int) -> dict:
 
 def run_pointwise(case: dict, path: int) -> dict:
     """The paper's pointwise objective on the release transient's first 0.6 s
-    (identification.synthetic), four CoRs free: Complex-RF, Levenberg-Marquardt,
-    intervals (identification.identify)."""
-    from identification.identify import identify
-    from identification.synthetic import TRUTH, release_problem
+    (identification.loop.synthetic), four CoRs free: Complex-RF, Levenberg-Marquardt,
+    intervals (identification.pipeline.identify)."""
+    from identification.pipeline.identify import identify
+    from identification.loop.synthetic import TRUTH, release_problem
     base = release_problem(window=0.6)
     p = dataclasses.replace(base, fixed={**base.fixed, "solver.vector_path": path})
     res = identify(p, max_evals=150, refine_evals=200, uncertainty=True, seed=0, progress=False)
@@ -147,8 +147,8 @@ def run_pointwise(case: dict, path: int) -> dict:
 
 
 def run_loop(case: dict, path: int) -> dict:
-    from identification.close_loop import close_loop
-    from identification.synthetic import effect_case
+    from identification.loop.close_loop import close_loop
+    from identification.loop.synthetic import effect_case
     problem, _ = effect_case([], case["seed"], params=dict(case["params"]), transducer=case["transducer"])
     problem.fixed["solver.vector_path"] = path
     res = close_loop(problem, rounds=1, seed=0, **LOOP_BUDGET, **case.get("extra", {}))

@@ -29,9 +29,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.campaign import run_campaign  # noqa: E402
-from identification.settings import load_settings  # noqa: E402
-from identification.stats import load_results, model_tests  # noqa: E402
+from identification.pipeline.campaign import run_campaign  # noqa: E402
+from identification.pipeline.settings import load_settings  # noqa: E402
+from identification.pipeline.stats import load_results, model_tests  # noqa: E402
 from lss_app.campaign_report import write_report  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.rig import generate_set  # noqa: E402
@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default="build/bench_field_campaign")
     ap.add_argument("--models", default="HC,HW,LW,LN")
     ap.add_argument("--lap-seconds", type=float, default=2.0)
-    ap.add_argument("--settings", default=None, help="an expert's settings file (identification.settings)")
+    ap.add_argument("--settings", default=None, help="an expert's settings file (identification.pipeline.settings)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)

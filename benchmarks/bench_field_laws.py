@@ -63,8 +63,8 @@ def surveyed(meas_dir: Path, truth: dict) -> dict:
 
 def identify_one(meas_dir: str, law: str, settings: dict) -> dict:
     """One measurement with one law, the drive known; the result as a dict."""
-    from identification.identify import identify
-    from identification.problem import drive_known, from_measurement
+    from identification.pipeline.identify import identify
+    from identification.objective.problem import drive_known, from_measurement
     from lss_fmu.measurement import load_measurement
     m = load_measurement(meas_dir)
     truth = load_truth(m)

@@ -32,8 +32,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from identification.identify import identify  # noqa: E402
-from identification.problem import drive_known, from_measurement  # noqa: E402
+from identification.pipeline.identify import identify  # noqa: E402
+from identification.objective.problem import drive_known, from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402

@@ -53,7 +53,7 @@ from bench_common import machine  # noqa: E402  (sets one BLAS thread first)
 
 import numpy as np  # noqa: E402
 
-from identification.problem import DESIGN, IdentificationProblem  # noqa: E402
+from identification.objective.problem import DESIGN, IdentificationProblem  # noqa: E402
 
 METHODS = ("complex-rf", "complex-rf-restart", "complex-rfp", "de", "cma-es")
 RESTARTS = 10   # complex-rf-restart: identify(restarts=RESTARTS)
@@ -98,9 +98,9 @@ def pin_fmu(workdir: Path) -> dict:
 
 
 def release_problem(fmu: str | None = None) -> IdentificationProblem:
-    """The test's release transient (identification.synthetic.release_problem),
+    """The test's release transient (identification.loop.synthetic.release_problem),
     simulated by the FMU at `fmu` (one instance per process)."""
-    from identification.synthetic import release_problem as make
+    from identification.loop.synthetic import release_problem as make
     from lss_fmu.runner import LazySimulator
     return make(sim=LazySimulator(fmu))
 
@@ -133,7 +133,7 @@ def run_one(method: str, problem: IdentificationProblem, budget: int, seed: int,
     marks = sorted({100, 300, 500, budget})
     w0, c0 = time.perf_counter(), _cpu()
     if method in ("complex-rf", "complex-rf-restart", "complex-rfp"):
-        from identification.identify import identify
+        from identification.pipeline.identify import identify
         workers = 2 if method == "complex-rfp" else 1
         res = identify(problem, max_evals=budget, seed=seed, progress=False, workers=workers,
                        restarts=RESTARTS if method == "complex-rf-restart" else 0)

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.problem import from_measurement  # noqa: E402
+from identification.objective.problem import from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS, SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
@@ -51,8 +51,8 @@ ROUGH = 0.5      # |forward - backward| / |central| (in the noise metric) beyond
 
 def information(p, x: np.ndarray, sigma: np.ndarray):
     """J (noise-weighted, flattened), and per variable the roughness of the record
-    in it: uncertainty.jacobian with a fixed step of STEP of each bound range."""
-    from identification.uncertainty import jacobian
+    in it: objective.jacobian.jacobian with a fixed step of STEP of each bound range."""
+    from identification.objective.jacobian import jacobian
     lo, hi = np.array(p.bounds_array, float).T
     J, _, rough = jacobian(p, x, p.simulate(x), weights=1.0 / sigma ** 2, steps=STEP * (hi - lo))
     J = J / sigma[None, :, None]

@@ -55,8 +55,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from identification.complex_rf import minimize_complex, parse_bounds  # noqa: E402
-from identification.complex_rfp import minimize_complex_parallel  # noqa: E402
+from identification.optim.complex_rf import minimize_complex, parse_bounds  # noqa: E402
+from identification.optim.complex_rfp import minimize_complex_parallel  # noqa: E402
 
 METHODS = ("complex-rf", "complex-rfp", "complex-rfp-md", "de", "cma-es")
 

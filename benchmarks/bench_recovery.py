@@ -6,7 +6,7 @@ The virtual transducer cart records each of the 22 recovery measurements
 (`lss rig --set recovery`, LW truth with Table 3's CoRs) `--repeats` times,
 record k in DATA_rk/mNN; the campaign groups the records of a measurement
 by their folder name and identifies them jointly with LW through the front
-door's pipeline (identification.pipeline, the defaults or `--settings`),
+door's pipeline (identification.pipeline.driver, the defaults or `--settings`),
 resumable. Each result is then compared with its answer file, which the
 identification never reads: |identified - true| per CoR, whether the CoR
 was claimed (identifiable) and its interval holds the truth, f / f(truth)
@@ -35,11 +35,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from bench_common import hash_sources  # noqa: E402
-from identification.campaign import run_campaign  # noqa: E402
-from identification.joint import own  # noqa: E402
-from identification.pipeline import build_problem  # noqa: E402
-from identification.settings import load_settings  # noqa: E402
-from identification.windowing import truncated  # noqa: E402
+from identification.pipeline.campaign import run_campaign  # noqa: E402
+from identification.objective.joint import own  # noqa: E402
+from identification.pipeline.driver import build_problem  # noqa: E402
+from identification.pipeline.settings import load_settings  # noqa: E402
+from identification.pipeline.windowing import truncated  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS, SYMBOL, TRIGGER  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402

@@ -26,10 +26,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.identify import local_stage  # noqa: E402
-from identification.journal import point_of  # noqa: E402
-from identification.problem import from_measurement  # noqa: E402
-from identification.windowing import LADDER, troubles, truncated  # noqa: E402
+from identification.pipeline.identify import local_stage  # noqa: E402
+from identification.optim.journal import point_of  # noqa: E402
+from identification.objective.problem import from_measurement  # noqa: E402
+from identification.pipeline.windowing import LADDER, troubles, truncated  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402

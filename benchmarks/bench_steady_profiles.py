@@ -6,7 +6,7 @@ On steady-running recovery records (a whole lap after the photocell, LW truth)
 each CoR is moved along a grid around its true value, every other design
 variable at the truth, and the record's objective is evaluated both ways from
 the same simulation: the paper's pointwise Eq. 10-12 and the statistics of
-identification.features (spectra and amplitude distributions per channel).
+identification.objective.features (spectra and amplitude distributions per channel).
 Beside each profile, the objective's own scatter: the same objective at tiny
 perturbations of the truth (1e-4 of each CoR's range), which a chaotic
 record turns into a different trajectory every time. A CoR is identifiable
@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.features import stat_errors  # noqa: E402
-from identification.problem import from_measurement, nrmsd  # noqa: E402
+from identification.objective.features import stat_errors  # noqa: E402
+from identification.objective.problem import from_measurement, nrmsd  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS, SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402

@@ -32,12 +32,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from identification.base_polish import STEP  # noqa: E402
-from identification.growing import FIRST  # noqa: E402
-from identification.identify import identify  # noqa: E402
-from identification.problem import from_measurement, tared  # noqa: E402
-from identification.refine import refine  # noqa: E402
-from identification.windowing import truncated  # noqa: E402
+from identification.pipeline.base_polish import STEP  # noqa: E402
+from identification.pipeline.growing import FIRST  # noqa: E402
+from identification.pipeline.identify import identify  # noqa: E402
+from identification.objective.problem import from_measurement, tared  # noqa: E402
+from identification.pipeline.refine import refine  # noqa: E402
+from identification.pipeline.windowing import truncated  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
 from lss_fmu.rig import load_truth, true_design_values  # noqa: E402
 

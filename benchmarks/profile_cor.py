@@ -7,7 +7,7 @@ free variable refitted by the pipeline's Levenberg-Marquardt (central
 differences, as identify.local_stage), each grid point started from its
 neighbour's fit, outwards from the estimate. The profile's statistic is the
 likelihood ratio in the metric of the Jacobian interval
-(identification.uncertainty: each channel's variance and effective sample
+(identification.objective.uncertainty: each channel's variance and effective sample
 count from the residual at the estimate),
 
     L(g) = sum_j w_j sum_i (r_ij(g)^2 - r_ij(estimate)^2),
@@ -37,11 +37,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from bench_common import code_version  # noqa: E402
-from identification.identify import REFINE_STEP  # noqa: E402
-from identification.joint import JointProblem  # noqa: E402
-from identification.problem import from_measurement, tared  # noqa: E402
-from identification.refine import refine  # noqa: E402
-from identification.uncertainty import information_weights  # noqa: E402
+from identification.pipeline.identify import REFINE_STEP  # noqa: E402
+from identification.objective.joint import JointProblem  # noqa: E402
+from identification.objective.problem import from_measurement, tared  # noqa: E402
+from identification.pipeline.refine import refine  # noqa: E402
+from identification.objective.uncertainty import information_weights  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import SYMBOL  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from identification.growing import record_S, records_off  # noqa: E402
-from identification.joint import JointProblem  # noqa: E402
-from identification.problem import from_measurement  # noqa: E402
-from identification.windowing import truncated  # noqa: E402
+from identification.pipeline.growing import record_S, records_off  # noqa: E402
+from identification.objective.joint import JointProblem  # noqa: E402
+from identification.objective.problem import from_measurement  # noqa: E402
+from identification.pipeline.windowing import truncated  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
 
 

@@ -1,6 +1,6 @@
 """The campaign report (the paper's section 4) from a campaign's results: a
 Table-3 style CoR table per model, the final objectives per model with the
-tests of identification.stats, and box plots of the CoRs per contact class
+tests of identification.pipeline.stats, and box plots of the CoRs per contact class
 and per wheel or joint type with the bounds drawn (Figs. 12-16). One
 Markdown report with its figures.
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from identification.stats import load_results, model_tests
+from identification.pipeline.stats import load_results, model_tests
 from lss_fmu.atomic import write_atomic, write_json_atomic
 from lss_fmu.design import COR_BOUNDS
 
@@ -97,7 +97,7 @@ def write_report(campaign: Path) -> Path:
                  else "At the 5 % level the models differ."), ""]
     for model, g in df.groupby("model"):
         lines += [f"## Coefficients of restitution, model {model}", "",
-                  "Each CoR with its 95 % interval (identification.uncertainty); *n.i.*: the record does not "
+                  "Each CoR with its 95 % interval (identification.objective.uncertainty); *n.i.*: the record does not "
                   "pin it down (interval wider than 40 % of the bounds, or the record is chaotic in it).", ""]
         lines += [_cor_table(g), ""]
     lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]

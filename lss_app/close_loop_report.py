@@ -1,6 +1,6 @@
 """The close-loop report: Markdown with figures, next to result.json.
 
-Per round: the verdict and the evidence behind it (identification.evidence:
+Per round: the verdict and the evidence behind it (identification.loop.evidence:
 the noise per channel, the likelihood-ratio test with its statistic and
 p-values, BIC, the held-out gain, the disturbances outside the catalogue,
 the candidates dropped and why), the attribution ranking (share of f each
@@ -19,8 +19,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from identification.catalogue import CATALOGUE  # noqa: E402
-from identification.noise import ALPHA, EXCESS_MIN  # noqa: E402
+from identification.loop.catalogue import CATALOGUE  # noqa: E402
+from identification.objective.noise import ALPHA, EXCESS_MIN  # noqa: E402
 from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
 from lss_fmu.design import LABELS  # noqa: E402
 
@@ -92,7 +92,7 @@ def _g(x, fmt=".3g") -> str:
 
 
 def evidence_section(rnd) -> list:
-    """The tests behind the verdict (identification.evidence)."""
+    """The tests behind the verdict (identification.loop.evidence)."""
     lines = ["### Evidence", ""]
     nz = getattr(rnd, "noise", None)
     ex = getattr(rnd, "excess", None)
@@ -149,7 +149,7 @@ def _residual_section(rnd, out: Path) -> list:
         return []
     lines = []
     try:
-        from identification.residual import describe
+        from identification.loop.residual import describe
 
         from .figures.residual import residual_figures
         figs = residual_figures(ra, out / f"round{rnd.number}_residual")

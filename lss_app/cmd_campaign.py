@@ -31,8 +31,8 @@ def register(sub, common) -> None:
 
 
 def run_campaign(args) -> int:
-    from identification.campaign import CampaignError, run_campaign as campaign
-    from identification.settings import load_settings
+    from identification.pipeline.campaign import CampaignError, run_campaign as campaign
+    from identification.pipeline.settings import load_settings
     if not args.data_dirs and args.manifest is None:
         raise CampaignError("give DATA folders or --manifest")
     models = [m for m in args.models.split(",") if m.strip()]

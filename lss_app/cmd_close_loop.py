@@ -1,5 +1,5 @@
 """`lss close-loop`: residual -> missing effect -> extended model, with the
-report (identification.close_loop; docs/close_loop.md).
+report (identification.loop.close_loop; docs/close_loop.md).
 
     lss close-loop MEAS_DIR --model HW --out DIR [--base-evals N] [--first-window S] [--max-evals N]
                    [--window S] [--rounds 2] [--effects a,b] [--seed S] [--noise declared|estimate]
@@ -16,10 +16,10 @@ from pathlib import Path
 
 
 def register(sub, common) -> None:
-    from identification.catalogue import CATALOGUE
-    from identification.close_loop import (BASE_REFINE_EVALS, PROFILE_POINTS, REFINE_EVALS, RESCORE_EVALS,
+    from identification.loop.catalogue import CATALOGUE
+    from identification.loop.close_loop import (BASE_REFINE_EVALS, PROFILE_POINTS, REFINE_EVALS, RESCORE_EVALS,
                                            TEST_MAX)
-    from identification.growing import FIRST
+    from identification.pipeline.growing import FIRST
     ap = sub.add_parser("close-loop", parents=[common], help="residual -> missing effect -> extended model",
                         description="Close the loop: residual -> missing effect -> extended model.")
     ap.add_argument("measurement", help="measurement folder (samples.csv + meta.json)")
@@ -65,9 +65,9 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from identification.catalogue import CATALOGUE
-    from identification.close_loop import base_from_result, close_loop
-    from identification.problem import from_measurement
+    from identification.loop.catalogue import CATALOGUE
+    from identification.loop.close_loop import base_from_result, close_loop
+    from identification.objective.problem import from_measurement
     from lss_fmu.atomic import write_json_atomic
     from lss_fmu.design import parse_free, parse_model
     from lss_fmu.measurement import load_measurement

@@ -1,8 +1,8 @@
 """`lss identify REC [REC ...] --model M --out DIR`: records of one sorter
 identified with one contact model by the method the records call for
-(identification.pipeline); the result file, the journal and the paper's
+(identification.pipeline.driver); the result file, the journal and the paper's
 figures (8-11). An expert's knobs live in a settings file (--settings,
-identification.settings); the settings used are written into result.json."""
+identification.pipeline.settings); the settings used are written into result.json."""
 from __future__ import annotations
 
 import logging
@@ -22,7 +22,7 @@ def register(sub, common) -> None:
     ap.add_argument("--out", required=True, help="output folder (result.json, journal, figures); run again "
                     "after an interruption, it resumes")
     ap.add_argument("--settings", default=None, metavar="TOML",
-                    help="an expert's settings file, table [identify] (identification.settings; default: the "
+                    help="an expert's settings file, table [identify] (identification.pipeline.settings; default: the "
                          "method of the recovery table)")
     ap.add_argument("--seed", type=int, default=0, help="the optimiser's seed (default 0)")
     ap.add_argument("--workers", type=int, default=1, help="parallel evaluations of a steady record's complex")
@@ -31,8 +31,8 @@ def register(sub, common) -> None:
 
 
 def run(args) -> int:
-    from identification.pipeline import build_problem, identify_records
-    from identification.settings import load_settings
+    from identification.pipeline.driver import build_problem, identify_records
+    from identification.pipeline.settings import load_settings
     from lss_fmu.atomic import write_json_atomic
     from lss_fmu.design import parse_model
     from lss_fmu.measurement import load_measurement

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from identification.noise import ALPHA
+from identification.objective.noise import ALPHA
 from lss_fmu.atomic import write_json_atomic
 
 EFFECT = "wheel_oor"
@@ -33,9 +33,9 @@ OOC, OOC_SEED = "crosstalk", 5
 
 
 def run_close_loop_stage(out: Path) -> list[str]:
-    from identification.catalogue import CATALOGUE
-    from identification.close_loop import close_loop
-    from identification.synthetic import effect_case
+    from identification.loop.catalogue import CATALOGUE
+    from identification.loop.close_loop import close_loop
+    from identification.loop.synthetic import effect_case
 
     from .close_loop_report import write_report
 

@@ -1,7 +1,7 @@
 """The stages of `make demo` after the plain simulation: a start-stop
 measurement of the built-in layout 7 by the virtual transducer cart, the
 identification of the paper's ten design variables as `lss identify` does it
-by default (identification.pipeline, with an interval for each), the report (identified
+by default (identification.pipeline.driver, with an interval for each), the report (identified
 against true values, the paper's figures), and closing the loop on data with
 an undeclared effect (lss_app.demo_close_loop)."""
 from __future__ import annotations
@@ -21,8 +21,8 @@ def run_stages(out: Path) -> list[str]:
     from lss_fmu.rig import folder_name, load_truth, run_measurement, true_design_values
     from lss_fmu.runner import ChainSimulator
 
-    from identification.pipeline import build_problem, identify_records
-    from identification.settings import Settings
+    from identification.pipeline.driver import build_problem, identify_records
+    from identification.pipeline.settings import Settings
 
     from .figures.identification import forces_overlay, history, nrmsd_bars
 
@@ -75,7 +75,7 @@ def run_stages(out: Path) -> list[str]:
         f"is in `data/answers/`, which identification never reads.\n",
         "## Identification\n",
         f"Contact model LW, the method `lss identify` takes by default for a transient record "
-        f"(identification.pipeline; settings in `identify/result.json`): the first "
+        f"(identification.pipeline.driver; settings in `identify/result.json`): the first "
         f"{float(problem.times[-1]):.3g} s of the record used, the likelihood objective (each force's RMSD "
         f"over the sensor's declared noise: about 7 when only the noise is left), the paper's ten design "
         f"variables free; {res.message}. {time.time() - t0:.0f} s wall, {cpu:.0f} CPU-s. "

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from identification.campaign import CampaignError, run_campaign, sorters_in
-from identification.settings import Settings
+from identification.pipeline.campaign import CampaignError, run_campaign, sorters_in
+from identification.pipeline.settings import Settings
 from lss_app.campaign_report import write_report
 
 # a campaign's settings for a test: short windows, a small complex, two CoRs free
@@ -126,7 +126,7 @@ def test_campaign_refuses_bad_input(data, reference, tmp_path):
 
 
 def test_sorters_by_folder_name_and_by_manifest(data, tmp_path):
-    from identification.campaign import sorters_of_manifest
+    from identification.pipeline.campaign import sorters_of_manifest
     sorters = sorters_in(data)
     assert [s.name for s in sorters] == ["m20", "m21"]
     assert [[Path(r).parent.name for r in s.records] for s in sorters] == [["data", "data_r1"]] * 2

@@ -1,9 +1,9 @@
-"""The catalogue's hypotheses (identification.catalogue), without the FMU."""
+"""The catalogue's hypotheses (identification.loop.catalogue), without the FMU."""
 from __future__ import annotations
 
 import numpy as np
 
-from identification.catalogue import CATALOGUE, Context
+from identification.loop.catalogue import CATALOGUE, Context
 
 
 def _ctx(starts) -> Context:

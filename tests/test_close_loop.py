@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 from identification import catalogue
-from identification.close_loop import close_loop
-from identification.noise import ALPHA
-from identification.synthetic import effect_case
+from identification.loop.close_loop import close_loop
+from identification.objective.noise import ALPHA
+from identification.loop.synthetic import effect_case
 
 BASE_EVALS = 120
 EXT_EVALS = 200   # the extended design has 5 to 8 variables: 120 evaluations stop short
@@ -184,8 +184,8 @@ def test_a_small_joint_play_is_not_read_as_a_track_bump(fmu_file, seed, transduc
     """A 1 um play in every joint: a track bump at one joint, fitted with the
     CoRs, can take most of the misfit; the play is probed on a ladder of gaps
     (catalogue.JointClearance), the candidates after the first that passes are
-    examined too (identification.rivals), and an extension stopped on its
-    rung's edge walks the ladder (identification.ladder). What must hold,
+    examined too (identification.loop.rivals), and an extension stopped on its
+    rung's edge walks the ladder (identification.loop.ladder). What must hold,
     whichever route the fits take: the play confirmed at its size, never the
     bump."""
     params = {"effects.joint_clearance.gap": 1e-6}
@@ -251,7 +251,7 @@ def test_degenerate_candidates_are_dropped_and_the_loop_goes_on(fmu_file, monkey
     a candidate whose bounds fall outside the FMU's range (issue 18: the run
     ended with `no room within the FMU's range`) is dropped with its reason."""
     from identification import candidates as CL
-    from identification.catalogue import Extension
+    from identification.loop.catalogue import Extension
     params = {"effects.sensor.offset.steering.F_left": 40.0, "effects.sensor.gain.steering.F_left": 0.2}
     problem, _ = effect_case([], 8, params=params, transducer=7)
     assert np.ptp(problem.samples[:, 3]) < 30.0          # the channel barely moves (noise and the fault)

@@ -25,7 +25,7 @@ if str(ROOT) not in sys.path:  # running without an installed package
     sys.path.insert(0, str(ROOT))
 
 from identification import ComplexResult, minimize_complex, minimize_complex_parallel  # noqa: E402
-from identification.complex_rfp import dask_map  # noqa: E402
+from identification.optim.complex_rfp import dask_map  # noqa: E402
 
 # ----------------------------------------------------------------------------
 # test functions (module level: picklable for process pools)

@@ -15,10 +15,10 @@ import dataclasses
 
 import pytest
 
-from identification.close_loop import close_loop
-from identification.identify_grown import identify_grown
-from identification.problem import drive_known, from_measurement
-from identification.synthetic import effect_case
+from identification.loop.close_loop import close_loop
+from identification.pipeline.identify_grown import identify_grown
+from identification.objective.problem import drive_known, from_measurement
+from identification.loop.synthetic import effect_case
 from lss_fmu.rig import load_truth, true_design_values
 
 from conftest import path_available

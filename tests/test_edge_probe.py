@@ -1,5 +1,5 @@
 """A CoR found near its box edge, refined again from the edge
-(identification.edge_probe), on a stand-in problem: a valley at the edge and
+(identification.pipeline.edge_probe), on a stand-in problem: a valley at the edge and
 a shallower one further in, the refinement a stand-in that goes down the
 valley it starts in."""
 from __future__ import annotations
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import identification.identify as identify_mod
+import identification.pipeline.identify as identify_mod
 from identification import edge_probe
-from identification.uncertainty import Interval
+from identification.objective.uncertainty import Interval
 
 FREE = ("contact.e_JA", "contact.e_JR", "contact.e_SW", "contact.e_RW", "drive.Kp")
 BOUNDS = [(0.2, 0.9)] * 4 + [(125.0, 2000.0)]

@@ -1,4 +1,4 @@
-"""The statistics behind a close-loop verdict (identification.evidence, .noise,
+"""The statistics behind a close-loop verdict (identification.loop.evidence, .noise,
 .holdout and .departures; issue 18).
 
 Pure numpy: white and correlated residuals made here, no FMU. What must hold:
@@ -216,7 +216,7 @@ def test_an_effect_must_matter_at_its_estimate():
     against the extension. A fit whose fall came from the base parameters
     (the effect at a negligible amplitude) does not count; one whose effect
     carries the fall does."""
-    from identification.candidates import switched_off
+    from identification.loop.candidates import switched_off
     rng = np.random.default_rng(11)
     g = _col(2, 10.0 * np.sin(2 * np.pi * 7.0 * T))
     base_run = np.zeros((N, K))
@@ -236,8 +236,8 @@ def test_an_effect_must_matter_at_its_estimate():
 
 
 def _round(number, outcome, *, confirmed=False, provisional=False):
-    from identification.attribution import Attribution
-    from identification.loop_result import Round
+    from identification.loop.attribution import Attribution
+    from identification.loop.loop_result import Round
     r = Round(number, 1.0, np.ones(7), Attribution(1.0, 1.0, [], []), f"round {number}: {outcome}",
               effect=f"effect{number}", confirmed=confirmed, provisional=provisional, outcome=outcome)
     r.verdict_if_confirmed = f"effect{number} confirmed"
@@ -248,7 +248,7 @@ def test_a_provisional_effect_needs_a_later_model_at_the_noise():
     """An effect that passes the tests while the model with it stays above the
     noise is confirmed only when a later round's model, carrying it, reaches
     the noise (close_loop.settle_provisional)."""
-    from identification.close_loop import settle_provisional
+    from identification.loop.close_loop import settle_provisional
     # alone (one round, or nothing found after it): not confirmed
     one = [_round(1, "not in the catalogue", provisional=True)]
     settle_provisional(one)

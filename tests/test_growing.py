@@ -1,4 +1,4 @@
-"""The base identification that grows its window (identification.growing).
+"""The base identification that grows its window (identification.pipeline.growing).
 
 On the release transient of layout 7 with the transducer on cart 20 the
 complex over the whole second stopped 200 times above the noise (the close
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.growing import grow, windows
-from identification.problem import tared
-from identification.synthetic import TRUTH, effect_case
+from identification.pipeline.growing import grow, windows
+from identification.objective.problem import tared
+from identification.loop.synthetic import TRUTH, effect_case
 from lss_fmu.sensor import NOISE_STD
 from lss_fmu.variables import FORCE_CHANNELS
 

@@ -1,4 +1,4 @@
-"""Identification over a growing window (issue 17, identification.identify_grown):
+"""Identification over a growing window (issue 17, identification.pipeline.identify_grown):
 the complex on the record's first 0.3 s, Levenberg-Marquardt carried along
 windows growing to the whole record, then the refinement and the intervals.
 
@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import identification.windowing as windowing
-from identification.identify_grown import identify_grown
-from identification.problem import drive_known, from_measurement
+import identification.pipeline.windowing as windowing
+from identification.pipeline.identify_grown import identify_grown
+from identification.objective.problem import drive_known, from_measurement
 from lss_fmu.rig import load_truth, true_design_values
 
 WINDOW = 1.5
@@ -36,9 +36,9 @@ def test_what_the_first_window_cannot_see_goes_back_to_its_start(start_stop_layo
     puts exactly those back to their start values (meta.json's nominal ones)
     and keeps everything the window does see (the CoRs, the pretension, the
     trigger point)."""
-    from identification.growing import _reset_unseen
-    from identification.problem import tared
-    from identification.windowing import truncated
+    from identification.pipeline.growing import _reset_unseen
+    from identification.objective.problem import tared
+    from identification.pipeline.windowing import truncated
     meas = start_stop_layout1
     truth = true_design_values(load_truth(meas))
     p = from_measurement(meas, "LW", window=WINDOW, tare=True, objective="likelihood")

@@ -1,11 +1,11 @@
-"""How a held-out gain reads in the reports (identification.holdout.HoldOut.text)."""
+"""How a held-out gain reads in the reports (identification.loop.holdout.HoldOut.text)."""
 from __future__ import annotations
 
 import math
 
 import pytest
 
-from identification.holdout import HoldOut
+from identification.loop.holdout import HoldOut
 
 
 @pytest.mark.parametrize("E_base, E_ext, text", [

@@ -17,9 +17,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from identification.identify import identify
-from identification.problem import DESIGN, IdentificationProblem
-from identification.profile import noise_floor, profile
+from identification.pipeline.identify import identify
+from identification.objective.problem import DESIGN, IdentificationProblem
+from identification.pipeline.profile import noise_floor, profile
 from lss_fmu.variables import FORCE_CHANNELS
 
 CORS = DESIGN[:4]
@@ -33,8 +33,8 @@ FIXED = {"track.guide_gap": -0.0003}
 def release_problem(fmu_file):
     """Layout 7, LW, the first 0.6 s after the trigger right behind the
     start: the measurement is the model at the truth (Table 3, row 1) plus
-    the sensor model's noise (identification.synthetic)."""
-    from identification.synthetic import release_problem as make
+    the sensor model's noise (identification.loop.synthetic)."""
+    from identification.loop.synthetic import release_problem as make
     return make()
 
 

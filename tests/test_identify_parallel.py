@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.identify import Journal, identify
-from identification.problem import DESIGN, IdentificationProblem
+from identification.pipeline.identify import Journal, identify
+from identification.objective.problem import DESIGN, IdentificationProblem
 
 CORS = DESIGN[:4]
 CENTRE = np.array([0.46, 0.558, 0.351, 0.645])

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.identify import identify
+from identification.pipeline.identify import identify
 
 
 class Valley:

@@ -1,6 +1,6 @@
 """Several start-stops of one sorter identified together (issue 17):
 `lss rig --repeat K` parks the chain elsewhere and draws the sensor anew,
-identification.joint.JointProblem shares the design variables and keeps
+identification.objective.joint.JointProblem shares the design variables and keeps
 each record's trigger point."""
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identification.identify import identify
-from identification.joint import JointProblem
-from identification.problem import drive_known, from_measurement
-from identification.uncertainty import intervals
+from identification.pipeline.identify import identify
+from identification.objective.joint import JointProblem
+from identification.objective.problem import drive_known, from_measurement
+from identification.objective.uncertainty import intervals
 from lss_fmu.design import CORS, DESIGN, TRIGGER
 from lss_fmu.rig import load_truth, make_case, true_design_values
 

@@ -1,4 +1,4 @@
-"""Where a joint identification starts (identification.joint_start, issue 17):
+"""Where a joint identification starts (identification.pipeline.joint_start, issue 17):
 the first record alone, then each further record's trigger point scanned on
 its first window."""
 from __future__ import annotations
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from identification import growing
-from identification.joint import JointProblem, own
-from identification.joint_start import single_start, trigger_scan
-from identification.problem import from_measurement, weighted_residual
-from identification.uncertainty import at_noise
-from identification.windowing import truncated
+from identification.objective.joint import JointProblem, own
+from identification.pipeline.joint_start import single_start, trigger_scan
+from identification.objective.problem import from_measurement, weighted_residual
+from identification.objective.uncertainty import at_noise
+from identification.pipeline.windowing import truncated
 from lss_fmu.design import TRIGGER
 from lss_fmu.rig import load_truth, true_design_values
 

@@ -1,4 +1,4 @@
-"""A journal answers for the objective that wrote it only (identification.journal).
+"""A journal answers for the objective that wrote it only (identification.optim.journal).
 
 Resumed into an objective that has changed since (here: another bowl; on a
 record, the logger's filter run at another rate, as when it left the
@@ -16,8 +16,8 @@ import logging
 import numpy as np
 import pytest
 
-from identification.identify import Journal, identify
-from identification.problem import DESIGN, IdentificationProblem, from_measurement
+from identification.pipeline.identify import Journal, identify
+from identification.objective.problem import DESIGN, IdentificationProblem, from_measurement
 
 CORS = DESIGN[:4]
 
@@ -51,7 +51,7 @@ def test_a_journal_of_another_objective_is_set_aside(tmp_path, caplog):
     assert (tmp_path / "m01.local.json").exists()
     moved = bowl(centre=(0.30, 0.70, 0.40, 0.50))
     fresh = run(moved, None)
-    with caplog.at_level(logging.WARNING, logger="identification.journal"):
+    with caplog.at_level(logging.WARNING, logger="identification.optim.journal"):
         again = run(moved, journal)
     # the stale journal answered nothing: the run is the fresh run, point for point
     assert again.replayed == 0 and again.evaluated == fresh.evaluated

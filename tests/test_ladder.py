@@ -1,15 +1,15 @@
-"""identification.ladder: an extension that ended on its rung's edge is
+"""identification.loop.ladder: an extension that ended on its rung's edge is
 identified again on the rung beyond, through the FMU."""
 import numpy as np
 
 from scipy.optimize import minimize_scalar
 
-from identification.attribution import weights
-from identification.catalogue import CATALOGUE
-from identification.extension import extended_problem
-from identification.ladder import walk_ladder
-from identification.problem import weighted_residual
-from identification.synthetic import make_problem
+from identification.objective.jacobian import weights
+from identification.loop.catalogue import CATALOGUE
+from identification.loop.extension import extended_problem
+from identification.loop.ladder import walk_ladder
+from identification.objective.problem import weighted_residual
+from identification.loop.synthetic import make_problem
 
 GAP = "effects.joint_clearance.gap"
 
@@ -80,8 +80,8 @@ def test_the_joint_fit_searches_the_rungs_beside_the_ranked_one(fmu_file):
     the rung never left that edge. Widened by a rung on each side and free on
     the first window, the joint fit of CoRs and gap finds the drawn gap; the
     rung is then centred on it."""
-    from identification.candidates import regrow
-    from identification.ladder import recentred, widened
+    from identification.loop.candidates import regrow
+    from identification.loop.ladder import recentred, widened
     ext, x, S, sim, w = _on_rung(4e-6, 7.69e-6, 0.0)
     lo, hi = ext.bounds[GAP]
     assert np.isclose(x[-1], lo) and lo > 4e-6            # clipped to the rung's lower edge, above the truth

@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from identification.attribution import weights
-from identification.problem import drive_known, from_measurement
-from identification.refine import refine
+from identification.objective.jacobian import weights
+from identification.objective.problem import drive_known, from_measurement
+from identification.pipeline.refine import refine
 from lss_fmu import measurement as M
 from lss_fmu.design import CORS
 from lss_fmu.rig import load_truth, true_design_values
@@ -127,7 +127,7 @@ def test_no_interval_is_claimed_from_a_fit_above_the_noise(record):
     0.2 off, the drive at the truth) gets no interval: every variable is
     reported not identifiable, saying why; at the truth every interval is
     "at the noise"."""
-    from identification.uncertainty import intervals
+    from identification.objective.uncertainty import intervals
     p = from_measurement(record, "LW", tare=True, objective="likelihood")
     truth = true_design_values(load_truth(record))
     p = drive_known(p, truth)

@@ -429,7 +429,7 @@ def test_absurd_nominal_values_are_refused(field, value):
 
 
 def test_window_longer_than_the_record_names_option_value_and_length(meas):
-    from identification.problem import from_measurement
+    from identification.objective.problem import from_measurement
     m = M.load_measurement(meas)
     with pytest.raises(ValueError, match=r"window = 1e\+09 s is longer than the record of test-01 \(1.99667 s, 600"):
         from_measurement(m, "LW", window=1e9)

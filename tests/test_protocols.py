@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from identification.problem import from_measurement
+from identification.objective.problem import from_measurement
 from lss_fmu import measurement as M
 from lss_fmu.protocol import Protocol, from_meta
 from lss_fmu.rig import load_truth, true_design_values

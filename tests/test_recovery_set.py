@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.problem import DESIGN, from_measurement
+from identification.objective.problem import DESIGN, from_measurement
 from lss_fmu.measurement import load_measurement
 from lss_fmu.rig import generate_set, load_truth
 from lss_fmu.variables import FORCE_CHANNELS

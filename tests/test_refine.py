@@ -1,10 +1,10 @@
 """The local refinement that ends each extended identification of the closed
-loop (identification.refine), on a stand-in problem without the FMU."""
+loop (identification.pipeline.refine), on a stand-in problem without the FMU."""
 from __future__ import annotations
 
 import numpy as np
 
-from identification.refine import refine
+from identification.pipeline.refine import refine
 
 
 class _Waves:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from identification.residual import (LINE_SNR_THRESHOLD, UNEVEN_RATIO, ResidualAnalysis, analyse_residual,
+from identification.loop.residual import (LINE_SNR_THRESHOLD, UNEVEN_RATIO, ResidualAnalysis, analyse_residual,
                                      describe, to_json)
 from lss_fmu.layouts import load_track
 from lss_fmu.variables import FORCE_CHANNELS

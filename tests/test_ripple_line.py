@@ -1,12 +1,12 @@
-"""The ripple's pitch from the residual's line (identification.ripple_line) and
+"""The ripple's pitch from the residual's line (identification.loop.ripple_line) and
 the hypotheses the catalogue builds around it."""
 import math
 
 import numpy as np
 import pytest
 
-from identification.catalogue import Context, MotorRipple
-from identification.ripple_line import LINE_RATIO, ripple_lines
+from identification.loop.catalogue import Context, MotorRipple
+from identification.loop.ripple_line import LINE_RATIO, ripple_lines
 
 BAND = (MotorRipple.P_MIN, MotorRipple.P_MAX)
 
@@ -99,9 +99,9 @@ def test_a_ripple_in_the_chain_shows_its_line():
     (as on one record of the rates benchmark, where the 100 N scan ranked
     117 mm first); at the clean model's true CoRs one of the residual's
     lines is the ripple's order within half a resolution cell."""
-    from identification.locate import signals_at, unwrap
-    from identification.problem import tared
-    from identification.synthetic import TRUTH, cart_trigger, make_problem
+    from identification.loop.locate import signals_at, unwrap
+    from identification.objective.problem import tared
+    from identification.loop.synthetic import TRUTH, cart_trigger, make_problem
     from lss_fmu.layouts import load_track
     from lss_fmu.runner import LazySimulator
     sim = LazySimulator()

@@ -1,4 +1,4 @@
-"""Two candidates that both pass (identification.rivals), without the FMU."""
+"""Two candidates that both pass (identification.loop.rivals), without the FMU."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from identification.rivals import DECISIVE, compare, passing
+from identification.loop.rivals import DECISIVE, compare, passing
 
 N_BASE = 4   # the base's free variables
 N = 2100     # residual values: 300 samples x 7 channels

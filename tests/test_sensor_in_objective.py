@@ -16,7 +16,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identification.problem import DESIGN, IdentificationProblem, anti_alias_of, filter_rate_of, from_measurement
+from identification.objective.problem import DESIGN, IdentificationProblem, anti_alias_of, filter_rate_of, from_measurement
 from lss_fmu.rig import load_truth, true_design_values
 from lss_fmu.sensor import CHANNELS, S_CHANNEL, SensorModel
 from lss_fmu.variables import FORCE_CHANNELS

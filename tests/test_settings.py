@@ -1,5 +1,5 @@
-"""The identification's settings (identification.settings) and the front
-door's checks on the records it is given (identification.pipeline): the
+"""The identification's settings (identification.pipeline.settings) and the front
+door's checks on the records it is given (identification.pipeline.driver): the
 defaults are the recovery table's method, an expert's TOML changes them, bad
 keys and values are refused by name, records of two sorters or protocols are
 refused before anything runs; `lss identify --help` stays short."""
@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from identification.pipeline import RecordsError, check_records, method_of
-from identification.settings import Settings, SettingsError, load_settings, settings_from
+from identification.pipeline.driver import RecordsError, check_records, method_of
+from identification.pipeline.settings import Settings, SettingsError, load_settings, settings_from
 from lss_fmu import measurement as M
 from lss_fmu.design import DESIGN
 from test_measurement import make_meta, make_samples

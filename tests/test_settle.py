@@ -1,4 +1,4 @@
-"""Settling a provisional effect (identification.settle, issue 18): confirmed
+"""Settling a provisional effect (identification.loop.settle, issue 18): confirmed
 only if, switched off in the final model with the rest refitted, the misfit
 rises decisively."""
 from __future__ import annotations
@@ -7,8 +7,8 @@ import dataclasses
 
 import numpy as np
 
-from identification.attribution import Attribution
-from identification.loop_result import Round
+from identification.loop.attribution import Attribution
+from identification.loop.loop_result import Round
 
 
 def _round(number, outcome, *, confirmed=False, provisional=False, **kw):
@@ -22,8 +22,8 @@ def test_a_provisional_effect_not_needed_in_the_final_model_stays_unconfirmed():
     """A later round's model reaches the noise, but switched off there (the rest
     refitted) the provisional effect leaves the misfit where it was: a later
     effect explains what it had taken; it is not confirmed
-    (identification.settle)."""
-    from identification.settle import settle_provisional
+    (identification.loop.settle)."""
+    from identification.loop.settle import settle_provisional
     calls = []
 
     def not_needed(r, last):
@@ -52,8 +52,8 @@ def test_a_provisional_effect_not_needed_in_the_final_model_stays_unconfirmed():
 def test_switching_an_effect_off_removes_its_parameters_everywhere():
     """The final model with an effect switched off carries none of its
     parameters (free, fixed or start value): the FMU's defaults, the effect off."""
-    from identification.problem import DESIGN, IdentificationProblem
-    from identification.settle import switched_off_in
+    from identification.objective.problem import DESIGN, IdentificationProblem
+    from identification.loop.settle import switched_off_in
     cor, h, s = DESIGN[0], "effects.track_bump.height", "effects.track_bump.s"
     p = IdentificationProblem(np.zeros((3, 7)), np.arange(3.0), "layout7", "LW", {cor: (0.1, 1.0), h: (-1e-3, 1e-3)},
                               fixed={s: 4.0, "drive.k_p": 1.0}, free=(cor, h), x0={cor: 0.2, h: 1e-4})
@@ -69,9 +69,9 @@ def test_an_effect_is_needed_in_the_final_model_only_if_the_record_has_it(fmu_fi
     model with that mass and a 20 um track bump the record does not have.
     Switched off (the CoRs and the other effect refitted), the mass raises
     the misfit far beyond the noise (needed), the bump does not."""
-    from identification.noise import noise_levels
-    from identification.settle import still_needed
-    from identification.synthetic import TRUTH, effect_case
+    from identification.objective.noise import noise_levels
+    from identification.loop.settle import still_needed
+    from identification.loop.synthetic import TRUTH, effect_case
     from lss_fmu.sensor import NOISE_STD
     mass, bump = "effects.mass.transducer_factor", "effects.track_bump.height"
     prob, _ = effect_case([], 7, params={mass: 1.25}, transducer=0)

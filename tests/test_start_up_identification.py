@@ -14,8 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.identify import identify
-from identification.problem import drive_known, from_measurement
+from identification.pipeline.identify import identify
+from identification.objective.problem import drive_known, from_measurement
 from lss_fmu.design import CORS
 from lss_fmu.rig import load_truth, true_design_values
 

@@ -52,7 +52,7 @@ def test_first_samples_do_not_depend_on_the_rounding_of_the_time_column(sim):
 
 
 def test_through_the_problem_records_of_several_lengths_agree(fmu_file):
-    from identification.synthetic import release_problem
+    from identification.loop.synthetic import release_problem
     x = [0.46, 0.558, 0.351, 0.645]
     short = release_problem(window=0.2).simulate(x)
     for window in (0.35, 0.6, 1.0):

@@ -1,4 +1,4 @@
-"""Shorter windows for records that turn chaotic (identification.windowing).
+"""Shorter windows for records that turn chaotic (identification.pipeline.windowing).
 
 The cut problem against the one from_measurement builds for the same window,
 and what counts as a trouble. The shrink stage itself runs in
@@ -11,11 +11,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identification.identify import IdentificationResult
-from identification.joint import JointProblem
-from identification.problem import from_measurement
-from identification.uncertainty import Interval
-from identification.windowing import troubles, truncated
+from identification.pipeline.identify import IdentificationResult
+from identification.objective.joint import JointProblem
+from identification.objective.problem import from_measurement
+from identification.objective.uncertainty import Interval
+from identification.pipeline.windowing import troubles, truncated
 
 
 def _result(problem, x, f, rough=(), above=False):

@@ -1,4 +1,4 @@
-"""Objective profiles drawn (identification.profile): f along each
+"""Objective profiles drawn (identification.pipeline.profile): f along each
 variable, the noise floor shaded, the truth marked where known."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Optional
 
 import numpy as np
 
-from identification.profile import Profile
+from identification.pipeline.profile import Profile
 from lss_fmu.design import symbol
 from .save import save_figure
 

@@ -1,4 +1,4 @@
-"""Figures of a residual analysis (identification.residual), PNG and SVG.
+"""Figures of a residual analysis (identification.loop.residual), PNG and SVG.
 
     from lss_app.figures.residual import residual_figures
     paths = residual_figures(analysis, "out/mNN/residual", measured, simulated)
@@ -30,7 +30,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import FuncFormatter, NullFormatter  # noqa: E402
 
-from identification.residual import LINE_SNR_THRESHOLD, ResidualAnalysis, as_matrix  # noqa: E402
+from identification.loop.residual import LINE_SNR_THRESHOLD, ResidualAnalysis, as_matrix  # noqa: E402
 from lss_fmu.design import LABELS  # noqa: E402
 
 KIND_COLOUR = {"curve": "0.88", "spiral": "#cfe0f5", "vcurve": "#fbe3c8"}

@@ -1,0 +1,123 @@
+"""The Jacobian of an identification problem's simulation, one module for
+every use of it:
+
+- `jacobian`: central differences, each step scaled to its variable's
+  sensitivity, with the roughness of each column (the intervals'; where
+  forward and backward differences disagree the objective is not smooth);
+- `one_sided_jacobian`: one-sided differences of a fixed share of each bound
+  range, towards the inside of the bounds (Levenberg-Marquardt's and the
+  closed loop's: half the simulations, no roughness needed);
+- `weights`: the metric per channel the objective sums the residual in;
+- `demean_columns`: a column as the tare sees it.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Optional
+
+import numpy as np
+
+from .problem import IdentificationProblem
+
+log = logging.getLogger(__name__)
+
+REL_STEP = 0.02                # difference step, of the bound range: the response to it stands well
+                               # above the solver's error at tolerance 1e-6 (docs/identification.md)
+RESPONSE = 5.0                 # the change a difference step aims at, in noise levels
+MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound range
+
+
+def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
+             rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
+             steps: Optional[np.ndarray] = None) -> tuple:
+    """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
+    each column): central differences inside the bounds, one-sided at a bound;
+    the roughness is |forward - backward| / |their mean| in the metric
+    `weights` per channel (at a bound: of two successive steps inwards); a
+    failed run leaves a zero column and an infinite roughness.
+
+    Each step is scaled to its variable's sensitivity unless `steps` are
+    given: a first step of `rel_step` of the bound range is shortened or
+    lengthened until the simulation moves by about RESPONSE in the metric of
+    `weights` (a few noise levels: far above the solver's error, far below the
+    nonlinearity of a variable the record pins to a thousandth of its range,
+    such as the pretension)."""
+    lo, hi = np.array(problem.bounds_array, float).T
+    wt = np.ones(sim0.shape[1]) if weights is None else np.asarray(weights, float)
+    J = np.zeros(sim0.shape + (len(x),))
+    used = np.zeros(len(x))
+    rough = np.zeros(len(x))
+
+    def norm(a):
+        return float(np.sqrt(np.sum(a ** 2 * wt)))
+
+    def at(k, h):
+        xh = np.array(x, float)
+        xh[k] += h
+        return problem.simulate(xh)
+    for k in range(len(x)):
+        span = hi[k] - lo[k]
+        try:
+            h = float(steps[k]) if steps is not None and steps[k] > 0 else rel_step * span
+            sgn = 1.0 if x[k] + h <= hi[k] else -1.0
+            y1 = at(k, sgn * h)
+            if steps is None:
+                for _ in range(3):   # scale the step to the response (linear guess), at most 3 tries
+                    resp = norm(y1 - sim0)
+                    if 0.25 * RESPONSE <= resp <= 4.0 * RESPONSE or resp == 0:
+                        break
+                    h = float(np.clip(h * RESPONSE / resp, MIN_STEP * span, MAX_STEP * span))
+                    sgn = 1.0 if x[k] + h <= hi[k] else -1.0
+                    y1 = at(k, sgn * h)
+            if sgn > 0 and x[k] - h >= lo[k]:
+                fwd, bwd = (y1 - sim0) / h, (sim0 - at(k, -h)) / h
+                J[:, :, k] = 0.5 * (fwd + bwd)
+                m = norm(J[:, :, k])
+                rough[k] = norm(fwd - bwd) / m if m > 0 else np.inf
+            else:  # at a bound: two steps inwards, their differences compared
+                d1 = sgn * (y1 - sim0) / h
+                d2 = sgn * (at(k, 2 * sgn * h) - y1) / h
+                J[:, :, k] = d1
+                m = norm(0.5 * (d1 + d2))
+                rough[k] = norm(d1 - d2) / m if m > 0 else np.inf
+            used[k] = h
+        except Exception as exc:  # the variable then counts as not identifiable
+            log.warning("jacobian column %s failed: %s", problem.free[k], exc)
+            rough[k] = np.inf
+    return J, used, rough
+
+
+def one_sided_jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
+                  rel_step: float = REL_STEP) -> list:
+    """One-sided differences of the simulation in each free variable, towards the
+    inside of the bounds; a failed run gives no column."""
+    cols = []
+    for k, (lo, hi) in enumerate(problem.bounds_array):
+        h = rel_step * (hi - lo)
+        if x[k] + h > hi:
+            h = -h
+        xk = np.array(x, float)
+        xk[k] += h
+        try:
+            cols.append((problem.simulate(xk) - sim0) / h)
+        except Exception as exc:
+            log.warning("base column %s failed: %s", problem.free[k], exc)
+    return cols
+
+
+def weights(problem: IdentificationProblem) -> np.ndarray:
+    """Per channel: f = sum_j w_j sum_t r_tj^2 (Eq. 10-12, or the likelihood's 1 / (n sigma_j^2))."""
+    if getattr(problem, "objective", "pointwise") == "likelihood":
+        return 1.0 / (len(problem.times) * problem.noise ** 2)
+    span = problem.samples.max(axis=0) - problem.samples.min(axis=0)
+    span = np.where(span > 0, span, 1.0)
+    return 1.0 / (len(problem.times) * span ** 2)
+
+
+def demean_columns(g: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """g with the mean of each masked channel (column) taken out: what the tare does to a residual."""
+    if not mask.any():
+        return g
+    g = np.array(g, float)
+    g[:, mask] -= g[:, mask].mean(axis=0)
+    return g
