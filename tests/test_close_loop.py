@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification import catalogue
+from identification.loop import catalogue
 from identification.loop.close_loop import close_loop
 from identification.objective.noise import ALPHA
 from identification.loop.synthetic import effect_case
@@ -250,7 +250,7 @@ def test_degenerate_candidates_are_dropped_and_the_loop_goes_on(fmu_file, monkey
     still found, as an offset (gain times the level plus offset). And
     a candidate whose bounds fall outside the FMU's range (issue 18: the run
     ended with `no room within the FMU's range`) is dropped with its reason."""
-    from identification import candidates as CL
+    from identification.loop import candidates as CL
     from identification.loop.catalogue import Extension
     params = {"effects.sensor.offset.steering.F_left": 40.0, "effects.sensor.gain.steering.F_left": 0.2}
     problem, _ = effect_case([], 8, params=params, transducer=7)

@@ -7,8 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import identification.pipeline.identify as identify_mod
-from identification import edge_probe
+from identification.pipeline import edge_probe
 from identification.objective.uncertainty import Interval
 
 FREE = ("contact.e_JA", "contact.e_JR", "contact.e_SW", "contact.e_RW", "drive.Kp")
@@ -43,7 +42,7 @@ def _ivs(x, identifiable=(True, False, True, True, True)):
 
 @pytest.fixture
 def stand_in(monkeypatch):
-    monkeypatch.setattr(identify_mod, "local_stage", _descend)
+    monkeypatch.setattr(edge_probe, "local_stage", _descend)
     return _TwoValleys()
 
 

@@ -15,10 +15,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from identification import departures as D
-from identification import evidence as E
-from identification import holdout as HO
-from identification import noise as NZ
+from identification.loop import departures as D
+from identification.loop import evidence as E
+from identification.loop import holdout as HO
+from identification.objective import noise as NZ
 
 N, K = 300, 7
 T = np.arange(N) / 300.0

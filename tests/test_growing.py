@@ -61,7 +61,7 @@ def test_a_regrown_extension_gets_the_profile_the_loop_was_given(monkeypatch):
     effect's parameters held on the first window."""
     import dataclasses
 
-    from identification import candidates
+    from identification.loop import candidates
 
     @dataclasses.dataclass
     class Ext:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification import growing
+from identification.pipeline import growing
 from identification.objective.joint import JointProblem, own
 from identification.pipeline.joint_start import single_start, trigger_scan
 from identification.objective.problem import from_measurement, weighted_residual
@@ -143,7 +143,7 @@ def test_a_failed_retry_leaves_the_complexs_point(two_records, monkeypatch):
 
 
 def test_the_auto_start_takes_the_first_record_where_the_complex_fails(two_records, monkeypatch):
-    from identification import identify_grown as ig
+    from identification.pipeline import identify_grown as ig
     jp, x_true = _joint_truth(two_records)
     monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(jp.x0_vector()))
     single = {"single": [{"window_s": 0.6, "S_per_sample": 1.0}], "from_window_s": 0.6,
@@ -197,7 +197,7 @@ def test_a_step_that_leaves_the_noise_is_taken_again_in_shorter_ones(two_records
 def test_restarts_take_the_next_seed_while_a_record_is_off_the_noise(two_records, monkeypatch):
     from types import SimpleNamespace
 
-    from identification import identify_grown as ig
+    from identification.pipeline import identify_grown as ig
     jp, x_true = _joint_truth(two_records)
     x_off = np.array(jp.x0_vector(), float)
     seeds = []

@@ -25,6 +25,12 @@ import logging
 from pathlib import Path
 from typing import Optional, Sequence
 
+import numpy as np
+
+from ..objective.joint import JointProblem
+from ..objective.problem import from_measurement
+from .identify import identify
+from .identify_grown import identify_grown
 from .settings import Settings
 
 log = logging.getLogger(__name__)
@@ -66,7 +72,6 @@ def method_of(records: Sequence) -> str:
 
 
 def _span(meas) -> float:
-    import numpy as np
     t = np.asarray(meas.time, float)
     return float(t[-1] - t[0]) if len(t) else 0.0
 
@@ -74,8 +79,6 @@ def _span(meas) -> float:
 def build_problem(records: Sequence, model: str, settings: Settings, sim=None):
     """The problem the front door fits: one record's IdentificationProblem, or
     several records' JointProblem, on the method's objective and window."""
-    from ..objective.joint import JointProblem
-    from ..objective.problem import from_measurement
     check_records(records)
     method = method_of(records)
     kw = dict(free=settings.free)
@@ -94,8 +97,6 @@ def identify_records(records: Sequence, model: str, settings: Optional[Settings]
     contact `model`; returns an identify.IdentificationResult whose `settings`
     and `method` say how (to_dict() carries both). `problem`: one already
     built by build_problem (else it is built here)."""
-    from .identify import identify
-    from .identify_grown import identify_grown
     settings = settings or Settings()
     if problem is None:
         problem = build_problem(records, model, settings)

@@ -28,6 +28,8 @@ import numpy as np
 
 from lss_fmu.design import CORS
 
+from .identify import local_stage
+
 log = logging.getLogger(__name__)
 
 EDGE_SHARE = 0.075   # of the CoR's range (0.7): within 0.0525 of an edge
@@ -55,7 +57,6 @@ def edge_probes(problem, x, f: float, intervals, refine_evals: int, journal: Opt
     docstring) and one entry per probe (the CoR, its edge, f from there,
     simulations, whether it was kept). Each probe's refinement is kept in a
     journal of its own (identify.local_stage), so a resumed run does not pay again."""
-    from .identify import local_stage
     x = np.asarray(x, float)
     probes = []
     if refine_evals <= 0:

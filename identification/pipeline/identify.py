@@ -19,19 +19,24 @@ import dataclasses
 import json
 import logging
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
 import numpy as np
 
-from ..optim.complex_rf import minimize_complex
-from lss_fmu.design import symbol
+from lss_fmu.atomic import write_json_atomic
+from lss_fmu.design import LAYOUT_DEPENDENT, symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
-from ..optim.journal import Journal, JournaledObjective, point_key, journaled_map
-from ..optim.optim_result import ComplexResult, jsonable
 from ..objective.problem import LINEARISABLE, IdentificationProblem
+from ..objective.uncertainty import Interval, intervals
+from ..optim.complex_rf import minimize_complex
+from ..optim.complex_rfp import minimize_complex_parallel
+from ..optim.journal import Journal, JournaledObjective, journaled_map, point_key
+from ..optim.optim_result import ComplexResult, jsonable
+from .refine import refine
 
 
 log = logging.getLogger(__name__)
@@ -66,6 +71,15 @@ class IdentificationResult:
     method: Optional[str] = None     # identification.pipeline.driver: "grown" or "statistics"
     settings: Optional[dict] = None  # identification.pipeline.driver: the settings used (Settings.to_dict)
     records: Optional[list] = None   # identification.pipeline.driver: the record folders fitted
+
+    @classmethod
+    def of(cls, problem, x0, f0: float, x, f: float, *, nfev: int, message: str, history_f, seconds: float,
+           evaluated: Optional[int] = None, replayed: int = 0, **more) -> "IdentificationResult":
+        """The one constructor of a result: the channel errors H0 and H are
+        the problem's at x0 and x (NaN where a point does not simulate)."""
+        return cls(problem, np.asarray(x0, float), float(f0), safe_nrmsd(problem, x0), np.asarray(x, float),
+                   float(f), safe_nrmsd(problem, x), int(nfev), int(nfev if evaluated is None else evaluated),
+                   int(replayed), message, np.asarray(history_f, float), float(seconds), **more)
 
     def to_dict(self) -> dict:
         p = self.problem
@@ -168,20 +182,18 @@ def identify(problem: IdentificationProblem, *, max_evals: int = 5000, seed=0,
         last, best = runs[-1], min(runs, key=lambda q: q.fun)
         history_f = np.concatenate([np.asarray(q.history.f, float)[q.history.used_order()] for q in runs])
         f0 = float(history_f[0])  # x0 is the first point of the initial complex
-        H0 = safe_nrmsd(problem, x0)
         x_best, f_best = np.asarray(best.x, float), float(best.fun)
         local = local_stage(problem, x_best, f_best, refine_evals, uncertainty, journal)
         if local.get("f", np.inf) < f_best:
             x_best, f_best = np.asarray(local["x"], float), float(local["f"])
-        H = safe_nrmsd(problem, x_best)
     finally:
         jr.close()
     message = last.message if len(runs) == 1 else f"{last.message} (after {len(runs) - 1} restarts)"
     if local.get("refined"):
         message += f"; refined to f = {f_best:.4g} in {local['refined']['nfev']} simulations"
-    return IdentificationResult(problem, x0, f0, H0, x_best, f_best, H,
-                                int(sum(q.nfev_used for q in runs)), evaluated, jr.replayed, message, history_f,
-                                time.time() - t0, iterations=_joined_iterations(runs),
+    return IdentificationResult.of(problem, x0, f0, x_best, f_best, nfev=int(sum(q.nfev_used for q in runs)),
+                                evaluated=evaluated, replayed=jr.replayed, message=message, history_f=history_f,
+                                seconds=time.time() - t0, iterations=_joined_iterations(runs),
                                 nfev_total=int(sum(q.nfev for q in runs)), nrounds=int(sum(q.nrounds for q in runs)),
                                 workers=max(1, int(workers)), optimizer=last, restarts=len(runs) - 1,
                                 refined=local.get("refined"), intervals=local.get("intervals"),
@@ -194,7 +206,6 @@ def _presolve(problem, evals: int, seed, journal, progress, f_tol, x_tol, worker
     """The first stage of `identify(presolve=...)`: the layout-dependent
     variables alone (journal: JOURNAL.presolve.jsonl). None when there is
     nothing to do: no budget, or no CoR and no other variable free."""
-    from lss_fmu.design import LAYOUT_DEPENDENT
     free = tuple(n for n in problem.free if n in LAYOUT_DEPENDENT)
     if evals <= 0 or not free or len(free) == len(problem.free):
         return None
@@ -207,10 +218,7 @@ def _presolve(problem, evals: int, seed, journal, progress, f_tol, x_tol, worker
 def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path]) -> dict:
     """The refinement and the intervals after the complex, kept in
     JOURNAL.local.json (atomically) for the resume of an interrupted run."""
-    from lss_fmu.atomic import write_json_atomic
 
-    from .refine import refine
-    from ..objective.uncertainty import Interval, intervals
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
         log.warning("%s: no refinement and no intervals with the %s objective", problem.name, problem.objective)
@@ -259,8 +267,6 @@ def _complex_run(problem, jr: Journal, bounds, x0, budget: int, seed, progress: 
     """One Complex-RF (or RFP) run behind the journal: (result, evaluations simulated)."""
     opts = dict(x0=x0, max_evals=budget, seed=seed, progress=progress, f_tol=f_tol, x_tol=x_tol)
     if workers > 1:
-        from concurrent.futures import ProcessPoolExecutor
-        from ..optim.complex_rfp import minimize_complex_parallel
         with ProcessPoolExecutor(workers) as ex:
             mapper = journaled_map(jr, ex)
             res = minimize_complex_parallel(problem, bounds, n_parallel=workers,

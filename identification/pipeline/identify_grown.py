@@ -31,10 +31,12 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .growing import FIRST, grow, records_off
 from ..objective.joint import JointProblem
-from .joint_start import single_start
 from ..objective.problem import LINEARISABLE
+from .edge_probe import edge_probes
+from .growing import FIRST, grow, records_off
+from .identify import IdentificationResult, local_stage, safe_nrmsd
+from .joint_start import single_start
 from .windowing import LADDER, shrink_window, truncated
 
 log = logging.getLogger(__name__)
@@ -162,7 +164,6 @@ def _safe_f(q, x) -> float:
 def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start,
           halvings):
     """One grown identification (identify_grown without restarts)."""
-    from .identify import IdentificationResult, local_stage, safe_nrmsd
     t0 = time.time()
     x0 = problem.x0_vector()
     if x0 is None:
@@ -209,9 +210,8 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
         message += f"; unseen on the first window, started from their start values: {', '.join(info['unseen'])}"
     if local.get("refined"):
         message += f"; refined to f = {f:.4g} in {local['refined']['nfev']} simulations"
-    res = IdentificationResult(problem, np.asarray(x0, float), f0, safe_nrmsd(problem, x0), np.asarray(x, float), f,
-                               safe_nrmsd(problem, x), nfev, nfev, 0, message, np.array([f0, f]), time.time() - t0,
-                               refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
+    res = IdentificationResult.of(problem, x0, f0, x, f, nfev=nfev, message=message, history_f=[f0, f],
+                                  seconds=time.time() - t0, refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
     if shrink:
         res = shrink_window(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
     return _from_edges(res, int(refine_evals), journal)
@@ -219,8 +219,6 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
 
 def _from_edges(res, refine_evals, journal):
     """`res` after the edge probes at its own window (identification.pipeline.edge_probe)."""
-    from .edge_probe import edge_probes
-    from .identify import safe_nrmsd
     q = res.problem
     jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{float(q.times[-1]):g}.jsonl")
     x, f, ivs, probes = edge_probes(q, res.x, float(res.f), res.intervals, refine_evals, jr)

@@ -29,6 +29,8 @@ from lss_fmu.design import TRIGGER
 from lss_fmu.variables import FORCE_CHANNELS
 
 from ..objective.problem import weighted_residual
+from ..objective.joint import own
+from .growing import grow
 from ..objective.uncertainty import at_noise
 from .windowing import truncated
 
@@ -72,8 +74,6 @@ def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
     joint metric (1 / sigma^2 per column, the records side by side); `info`
     the first record's trail, each further record's trigger point and S on
     its first window, the simulations spent."""
-    from .growing import grow
-    from ..objective.joint import own
     n = len(FORCE_CHANNELS)
     first_part = problem.parts[0]
     jr = None if journal is None else Path(journal).with_name(Path(journal).stem + ".single.jsonl")

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..objective.jacobian import demean_columns, jacobian, one_sided_jacobian, weights
 from ..objective.problem import IdentificationProblem, tared
+from ..objective.uncertainty import noise_level
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +70,6 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     steps = None   # central: scaled to each variable's sensitivity at the start, kept after
     while nfev + per_jacobian + 1 <= max_evals:
         if central:
-            from ..objective.uncertainty import noise_level
             w = 1.0 / noise_level(problem.samples - sim) ** 2
             J, used, _ = jacobian(problem, x, sim, rel_step, w, steps)
             nfev += per_jacobian + (len(x) if steps is None else 0)
