@@ -136,6 +136,9 @@ def test_sorters_by_folder_name_and_by_manifest(data, tmp_path):
     manifest.write_text('[sorters]\nline_a = ["nowhere/m01"]\n')
     with pytest.raises(CampaignError, match=r"sorters.line_a: .*nowhere/m01 is not a measurement folder"):
         sorters_of_manifest(manifest)
+    manifest.write_text('[sorters]\n"line a/b" = ["x"]\n')
+    with pytest.raises(CampaignError, match="sorter name 'line a/b'"):
+        sorters_of_manifest(manifest)
     manifest.write_text('[sorter]\nline_a = []\n')
     with pytest.raises(CampaignError, match=r"sorters.toml: needs a \[sorters\] table"):
         sorters_of_manifest(manifest)

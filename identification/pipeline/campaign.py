@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import time
 import tomllib
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -109,6 +110,8 @@ def sorters_of_manifest(path: Union[str, Path]) -> list:
         raise CampaignError(f"{path}: needs a [sorters] table of name = [record folders]")
     out = []
     for name, recs in table.items():
+        if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):   # it names the sorter's result and journal files
+            raise CampaignError(f"{path}: sorter name {name!r}: use letters, digits, '_', '.' and '-' only")
         if not isinstance(recs, list) or not recs or not all(isinstance(r, str) for r in recs):
             raise CampaignError(f"{path}: sorters.{name} = {recs!r}: must be a list of record folders")
         folders = [(path.parent / r) for r in recs]
