@@ -10,7 +10,6 @@ from identification.pipeline import growing
 from identification.objective.joint import JointProblem, own
 from identification.pipeline.joint_start import single_start, trigger_scan
 from identification.objective.problem import from_measurement, weighted_residual
-from identification.objective.uncertainty import at_noise
 from identification.pipeline.windowing import truncated
 from lss_fmu.design import TRIGGER
 from lss_fmu.rig import load_truth, true_design_values
@@ -157,41 +156,6 @@ def test_the_auto_start_takes_the_first_record_where_the_complex_fails(two_recor
     assert np.allclose(res.x[k], x_true[k], atol=0.03)
     with pytest.raises(ValueError, match="start 'somewhere' is not one of complex, single, auto"):
         ig.identify_grown(jp, start="somewhere")
-
-
-def test_a_step_that_leaves_the_noise_is_taken_again_in_shorter_ones(two_records, monkeypatch):
-    from types import SimpleNamespace
-    jp, x_true = _joint_truth(two_records)
-    monkeypatch.setattr(growing, "identify", lambda q, **k: _Complex(x_true))
-    calls = []
-
-    sigma = np.asarray(jp.noise, float)
-
-    def fake_refine(q, x, **k):
-        # the direct step to the second window carries the second record off (1.6 per sample there, 0.7
-        # on the first: 1.15 together, at the noise by the joint test), shorter steps do not
-        calls.append(float(q.times[-1] - q.times[0]))
-        bad = len(calls) == 1
-        sim = np.array(q.samples, float)
-        if bad:
-            sign = np.where(np.arange(len(sim)) % 2 == 0, 1.0, -1.0)[:, None]
-            sim[:, :7] += np.sqrt(0.7) * sigma[:7] * sign
-            sim[:, 7:14] += np.sqrt(1.6) * sigma[7:14] * sign
-        return SimpleNamespace(x=np.asarray(x, float), f=(1.15 if bad else 1.0) * q.samples.size, nfev=1, sim=sim)
-    monkeypatch.setattr(growing, "refine", fake_refine)
-    w = 1.0 / sigma ** 2
-    x, info = growing.grow(jp, channel_weights=w, profile_points=0, first=0.3, growth=1.45, halvings=2)
-    t = [e["window_s"] for e in info["windows"]]
-    q2 = truncated(jp, jp.times[0] + t[1])
-    assert at_noise(q2, 1.15 * q2.samples.size / len(q2.samples))   # the joint test would not have seen it
-    assert info["windows"][1].get("substeps") == 4 and info["windows"][1]["S_per_sample"] == pytest.approx(1.0)
-    sub = calls[1:5]   # four windows growing geometrically from the first to the second
-    assert sub == sorted(sub) and sub[0] > t[0] and sub[-1] == pytest.approx(t[1], abs=0.01)
-    assert not any("substeps" in e for e in info["windows"][2:])
-    calls.clear()
-    x, info = growing.grow(jp, channel_weights=w, profile_points=0, first=0.3, growth=1.45, halvings=0)
-    assert len(calls) == len(info["windows"]) - 1 and info["windows"][1]["S_per_sample"] == pytest.approx(1.15)
-    assert info["windows"][1]["records_off"] == [1]   # seen, but no step control asked
 
 
 def test_restarts_take_the_next_seed_while_a_record_is_off_the_noise(two_records, monkeypatch):

@@ -77,7 +77,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
          reset_unseen: bool = False, start: Optional[Sequence[float]] = None,
-         retry: Optional[Callable[[], tuple]] = None, halvings: int = 0) -> tuple:
+         retry: Optional[Callable[[], tuple]] = None) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -105,14 +105,9 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     stays above the declared noise (uncertainty.at_noise, RETRY_Z sd; the
     likelihood objective only); Levenberg-Marquardt on the first window from that
     point, and the better of the two goes on (`info["retry"]`). Where the
-    complex's first window is at the noise nothing changes. `halvings`:
-    where a window's step leaves the noise that the window before was at,
-    the step is taken again in 2^halvings shorter ones from the point
-    before, and the better of the two goes on (a continuation's step
-    control: the optimum moved too far for one step; the window's entry
-    then lists `substeps`). A step leaves the noise where any one record's S
-    at its end lies RETRY_Z sd above the noise (records_off; every
-    window's entry lists such records, `records_off`). 0: one step a window.
+    complex's first window is at the noise nothing changes. Every window's
+    entry lists the records whose S at its end lies RETRY_Z sd above the
+    noise (`records_off`).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -158,13 +153,6 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     trail = [{"window_s": steps[0], "S_per_sample": float(S) / q.samples.size}]
     if keep_points:
         trail[0]["x"] = x.tolist()
-    prev_t, prev_ok = steps[0], True
-    if halvings:
-        try:
-            prev_ok = not records_off(q1, q1.simulate(x1), w)
-            nfev += 1
-        except Exception:   # a first point that does not simulate: no step control
-            prev_ok = False
     for t in steps[1:]:
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
         r = refine(q, x, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
@@ -172,26 +160,12 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         # refine's f is S in the same metric at its point: no simulation more
         xr, fr = (np.asarray(r.x, float), float(r.f)) if np.isfinite(r.f) else (x, float("inf"))
         off = records_off(q, r.sim, w) if getattr(r, "sim", None) is not None and np.isfinite(r.f) else []
-        substeps = 0
-        if halvings and prev_ok and (off or not np.isfinite(fr)):
-            xs, fs, used = _substeps(problem, x, prev_t, t, duration, 2 ** int(halvings), per_window, w)
-            nfev += used
-            if fs < fr:
-                xr, fr, substeps = xs, fs, 2 ** int(halvings)
-                try:
-                    off = records_off(q, q.simulate(xr), w)
-                    nfev += 1
-                except Exception:
-                    off = [-1]
         x = xr
         trail.append({"window_s": t, "S_per_sample": fr / q.samples.size})
-        if substeps:
-            trail[-1]["substeps"] = substeps
         if off:
             trail[-1]["records_off"] = [int(k) for k in off]
         if keep_points:
             trail[-1]["x"] = x.tolist()
-        prev_t, prev_ok = t, not off and np.isfinite(fr)
     return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0, "unseen": unseen,
                "retry": retried}
 
@@ -215,22 +189,6 @@ def record_S(q, sim, w, z: float = RETRY_Z) -> tuple:
     k = len(FORCE_CHANNELS) if m % len(FORCE_CHANNELS) == 0 else m
     per = [float(np.mean(r[:, j * k:(j + 1) * k])) for j in range(m // k)]
     return per, 1.0 + z * np.sqrt(2.0 / (n * k))
-
-
-def _substeps(problem, x, t_from, t_to, duration, n, per_window, w) -> tuple:
-    """(x, S at t_to, simulations): Levenberg-Marquardt from x over n
-    windows growing geometrically from t_from to t_to."""
-    used, f = 0, float("inf")
-    for k in range(1, n + 1):
-        t = t_from * (t_to / t_from) ** (k / n)
-        last = k == n
-        q = problem if last and t_to >= duration else truncated(problem, problem.times[0] + (t_to if last else t))
-        r = refine(q, x, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
-        used += r.nfev
-        if not np.isfinite(r.f):
-            return x, float("inf"), used
-        x, f = np.asarray(r.x, float), float(r.f)
-    return x, f, used
 
 
 def _retried(q1, x1, S, unseen, retry, w, per_window) -> tuple:

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from ..objective.joint import JointProblem
 from ..objective.problem import LINEARISABLE
@@ -41,15 +42,15 @@ from .windowing import LADDER, shrink_window, truncated
 
 log = logging.getLogger(__name__)
 
-STARTS = ("complex", "single", "auto")   # where a joint problem's first window starts (identification.pipeline.joint_start)
+STARTS = ("complex", "single", "auto")   # where a joint problem's first window starts (joint_start)
+STAGES = ("grown", "refined", "windows", "edges")   # what the progress bar counts, per run
 PROFILE_POINTS = 9   # the profile of the least-determined variable on the first window (growing.grow)
 
 
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
-                   progress: bool = False, workers: int = 1, restarts: int = 0, refine_evals: int = 400,
-                   uncertainty: bool = False, presolve: int = 0, shrink: bool = False,
-                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "auto",
-                   halvings: int = 0):
+                   progress: bool = False, restarts: int = 0, refine_evals: int = 400,
+                   uncertainty: bool = False, shrink: bool = False,
+                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "auto"):
     """The problem (an IdentificationProblem or a joint one) identified over
     a growing window: `max_evals` complex evaluations on the first `first`
     seconds, the profile there, Levenberg-Marquardt over growing windows in
@@ -65,16 +66,16 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     where its first window stays above the declared noise the single start
     as well, the better of the two on that window going on: growing.grow's
     `retry`; on one record, or without a declared noise, the complex).
-    `halvings`: a window's step that leaves the noise is taken again in
-    2^halvings shorter ones (growing.grow). `restarts`: while a record's S
+    `restarts`: while a record's S
     at the chosen window lies RETRY_Z sd above the declared noise
     (growing.records_off), the whole identification again with the next
     seed, at most `restarts` times; the better one goes on (`_better`).
     At the chosen window an identifiable CoR found near its box edge is
     refined again from the edge, kept where f ends lower
     (identification.pipeline.edge_probe; with `uncertainty` and `refine_evals`).
-    `workers` and `presolve` are accepted for the common signature and not
-    used: the first window's complex is short."""
+    `progress`: a bar over the stages (the grown windows, the refinement
+    and intervals, the shorter windows, the edge probes, each restart), with
+    f after each."""
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
         raise ValueError(f"grown identification: the {problem.objective} objective is not a sum of squares "
                          f"(use one of {', '.join(LINEARISABLE)})")
@@ -85,24 +86,43 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     if shrink and not uncertainty:
         raise ValueError("grown identification with shrink needs uncertainty=True: the roughness of the CoRs "
                          "decides the window")
-    if not 0 <= int(halvings) <= 4:
-        raise ValueError(f"grown identification: halvings = {halvings} must be 0 to 4")
     if start not in STARTS:
         raise ValueError(f"grown identification: start {start!r} is not one of {', '.join(STARTS)}")
     if int(restarts) < 0:
         raise ValueError(f"grown identification: restarts = {restarts} must be 0 or more")
-    del workers, presolve
     t0 = time.time()
+    bar = tqdm(total=len(STAGES), desc=f"{problem.name}", unit="stage", leave=False) if progress else None
     once = dict(max_evals=max_evals, refine_evals=refine_evals, uncertainty=uncertainty, shrink=shrink,
-                ladder=ladder, first=first, start=start, halvings=halvings)
+                ladder=ladder, first=first, start=start, tick=_ticker(bar))
+    try:
+        return _restarted(problem, seed, journal, int(restarts), once, bar, t0)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _ticker(bar):
+    """A stage reporter: the bar moved on by one stage, with the stage's f (no bar: nothing)."""
+    def tick(stage: str, f: float) -> None:
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix_str(f"{stage}: f = {f:.4g}")
+    return tick
+
+
+def _restarted(problem, seed, journal, restarts: int, once: dict, bar, t0):
+    """The grown identification, then while a record stays off the noise again with the next seed."""
     best = _once(problem, seed=seed, journal=journal, **once)
-    if not int(restarts):
+    if not restarts:
         return best
     tried = [_tried(seed, best)]
     kept = 0
-    for k in range(1, int(restarts) + 1):
+    for k in range(1, restarts + 1):
         if not tried[kept]["records_off"]:
             break
+        if bar is not None:
+            bar.reset(total=len(STAGES))
+            bar.set_description(f"{problem.name} (restart {k})")
         log.info("%s: records %s off the noise at the chosen window: again with seed %s", problem.name,
                  tried[kept]["records_off"], _next_seed(seed, k))
         jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".s{k}.jsonl")
@@ -161,8 +181,7 @@ def _safe_f(q, x) -> float:
         return float("inf")
 
 
-def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start,
-          halvings):
+def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start, tick):
     """One grown identification (identify_grown without restarts)."""
     t0 = time.time()
     x0 = problem.x0_vector()
@@ -184,7 +203,8 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
         retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start, retry=retry, halvings=int(halvings))
+                   start=x_start, retry=retry)
+    tick("grown", float(info["windows"][-1]["S_per_sample"]) * problem.samples.size)
     if started is not None:
         info["nfev"] += started["nfev"]
     elif info.get("retry") and info["retry"]["taken"]:
@@ -194,6 +214,7 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
     nfev = int(info["nfev"]) + 1 + int((local.get("refined") or {}).get("nfev", 0))
+    tick("refined", f)
     trail = [{k: v for k, v in t.items() if k != "x"} for t in info["windows"]]
     message = (f"grown over {len(trail)} windows to {trail[-1]['window_s']:.3g} s "
                f"(S per sample {trail[0]['S_per_sample']:.3g} on the first, {trail[-1]['S_per_sample']:.3g} "
@@ -211,10 +232,14 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     if local.get("refined"):
         message += f"; refined to f = {f:.4g} in {local['refined']['nfev']} simulations"
     res = IdentificationResult.of(problem, x0, f0, x, f, nfev=nfev, message=message, history_f=[f0, f],
-                                  seconds=time.time() - t0, refined=local.get("refined"), intervals=local.get("intervals"), grown=trail)
+                                  seconds=time.time() - t0, refined=local.get("refined"),
+                                  intervals=local.get("intervals"), grown=trail)
     if shrink:
         res = shrink_window(problem, res, info["windows"], ladder, int(refine_evals), journal, t0)
-    return _from_edges(res, int(refine_evals), journal)
+    tick("windows", res.f)
+    res = _from_edges(res, int(refine_evals), journal)
+    tick("edges", res.f)
+    return res
 
 
 def _from_edges(res, refine_evals, journal):

@@ -21,7 +21,8 @@ def load_results(campaign: Path) -> pd.DataFrame:
     rows = []
     for f in files:
         r = json.loads(f.read_text())
-        row = {"measurement": r.get("sorter", r["measurement"]), "records": len(r.get("records") or [1]), "number": r.get("number"), "model": r["model"], "f": r["f"],
+        row = {"measurement": r.get("sorter", r["measurement"]), "records": len(r.get("records") or [1]),
+               "number": r.get("number"), "model": r["model"], "f": r["f"],
                "f0": r["f0"], "nfev": r["nfev"], "wheel_type": r.get("wheel_type"),
                "coupling_type": r.get("coupling_type"), "layout": r.get("layout")}
         for k in CORS:
