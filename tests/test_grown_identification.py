@@ -62,7 +62,7 @@ def test_what_the_first_window_cannot_see_goes_back_to_its_start(start_stop_layo
         assert xr[i] == (x0[i] if name in unseen else x[i]), name
 
 
-def test_a_shorter_window_starts_from_the_grown_point_at_its_length(start_stop_layout1, monkeypatch):
+def test_a_shorter_window_starts_from_the_grown_point_at_its_length(start_stop_layout1, monkeypatch, capsys):
     """While the window is in trouble (forced here: the check itself is
     windowing's), the next shorter window of the ladder is refined from the
     trail's point at the longest grown window not beyond it, not from the
@@ -72,7 +72,7 @@ def test_a_shorter_window_starts_from_the_grown_point_at_its_length(start_stop_l
     p = drive_known(from_measurement(meas, "LW", window=WINDOW, tare=True, objective="likelihood"), truth)
     monkeypatch.setattr(windowing, "troubles", lambda res: ["forced"] if res.problem.times[-1] > 1.1 else [])
     try:
-        res = identify_grown(p, shrink=True, max_evals=30, refine_evals=5, uncertainty=True, seed=1)
+        res = identify_grown(p, shrink=True, max_evals=30, refine_evals=5, uncertainty=True, seed=1, progress=True)
     finally:
         p.sim.close()
     tried = res.windows
@@ -82,6 +82,8 @@ def test_a_shorter_window_starts_from_the_grown_point_at_its_length(start_stop_l
         assert t["from_window_s"] in grown and t["from_window_s"] <= t["window_s"] + 1e-9
     assert res.problem.times[-1] <= 1.0 + 1e-9 and "; windows " in res.message
     assert res.to_dict()["window_s"] == pytest.approx(1.0, abs=0.01)
+    bar = capsys.readouterr().err   # the progress bar went through the stages, f shown after each
+    assert "4/4" in bar and "edges: f = " in bar
 
 
 def test_grown_refuses_what_it_cannot_do(start_stop_layout1):

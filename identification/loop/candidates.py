@@ -14,7 +14,7 @@ from typing import Optional
 import numpy as np
 
 from ..objective.jacobian import demean_columns
-from .attribution import Attribution
+from .attribution import Attribution, sensitivity_signatures
 from ..pipeline.base_polish import BASE_REFINE_EVALS, PROFILE_POINTS, STEP
 from .catalogue import CATALOGUE, SensorError
 from .evidence import fit_gain, lr_test, project_out
@@ -98,7 +98,6 @@ def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0:
     """The effect's signature at the base (the attribution's probes; for the
     sensor those of the channels the extension frees, unless `every`), tared
     channels demeaned."""
-    from .attribution import sensitivity_signatures
     probes = sc.hypothesis.probes
     if isinstance(CATALOGUE[sc.effect], SensorError) and not every:
         names = set(ext.free)

@@ -17,17 +17,16 @@ from typing import Callable, Optional
 import numpy as np
 
 from lss_fmu.variables import FORCE_CHANNELS
+from lss_fmu.sensor import NOISE_STD, OFFSET_STD
 
 SENSOR_CH = [c.replace("transducer.", "") for c in FORCE_CHANNELS]
 
 
 def _offset_std() -> np.ndarray:
-    from lss_fmu.sensor import OFFSET_STD
     return np.array([OFFSET_STD[c] for c in FORCE_CHANNELS], float)
 
 
 def _noise_std() -> np.ndarray:
-    from lss_fmu.sensor import NOISE_STD
     return np.array([NOISE_STD[c] for c in FORCE_CHANNELS], float)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from lss_fmu.variables import FORCE_CHANNELS
 
 from .evidence import LRTest, fit_gain, lr_test, project_out
+from ..objective.problem import tared
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +123,6 @@ def departures(problem, x, sim: np.ndarray, r: np.ndarray, J: Sequence[np.ndarra
     the base simulated at t / (1 + eps), eps scanned within +-CLOCK_MAX; one
     parameter, about 20 simulations). Each with its LRTest (m: its own
     hypotheses)."""
-    from ..objective.problem import tared
     out = []
     n, k = r.shape
     t = np.asarray(problem.times, float)

@@ -11,6 +11,7 @@ import numpy as np
 from .attribution import HypothesisScore
 from .catalogue import CATALOGUE, SENSOR_CH, Extension, SensorError
 from ..objective.problem import IdentificationProblem
+from lss_fmu.variables import BY_NAME
 
 
 def extension_of(score: HypothesisScore) -> Extension:
@@ -39,7 +40,6 @@ def extended_problem(problem: IdentificationProblem, x: np.ndarray, ext: Extensi
 def _within_fmu_range(name: str, lo: float, hi: float) -> tuple:
     """The bounds cut to the FMU variable's declared range: a design point
     outside it is refused by the FMU (a failed simulation, not a bad fit)."""
-    from lss_fmu.variables import BY_NAME
     var = BY_NAME.get(name)
     if var is not None:
         if var.min is not None:

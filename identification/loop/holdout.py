@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..objective.jacobian import demean_columns, one_sided_jacobian
+from ..objective.problem import tared
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,6 @@ def folds(n: int, blocks: int = HOLDOUT_BLOCKS) -> np.ndarray:
 
 
 def _tared_residual(problem, sim):
-    from ..objective.problem import tared
     r = problem.samples - sim
     demean = np.zeros(r.shape[1], bool)
     if problem.tare is not None:

@@ -22,6 +22,9 @@ from lss_fmu.runner import LazySimulator
 from ..objective.problem import IdentificationProblem, tare_of
 from lss_fmu.sensor import NOISE_STD, OFFSET_STD
 from lss_fmu.variables import FORCE_CHANNELS
+from lss_fmu.rig_effects import add_to_forces
+from lss_fmu import rig_effects
+from lss_fmu.layouts import load_track
 
 LAYOUT = "layout7"
 TRUTH = {"contact.e_JA": 0.46, "contact.e_JR": 0.558, "contact.e_SW": 0.351, "contact.e_RW": 0.645,
@@ -93,7 +96,6 @@ def make_problem(effect_params: dict, seed: int, *, transducer: int = 0, s_m: fl
         clean = simulate_with(p, truth, effect_params)
     for name in ("interference", "crosstalk"):
         if name in artefacts:
-            from lss_fmu.rig_effects import add_to_forces
             clean, _ = add_to_forces(times, clean, name, artefacts[name])
     rng = np.random.default_rng([seed, 99])
     noisy = clean + rng.normal(size=clean.shape) * [NOISE_STD[c] for c in FORCE_CHANNELS]
@@ -116,11 +118,9 @@ def effect_case(effects, seed: int, artefact: dict | None = None, *, params: dic
     outside the catalogue drawn by the rig from the seed (or {name:
     definition}). `transducer`: the transducer cart (default 0, or the one
     `lead` m before a bump), triggered just after the release."""
-    from lss_fmu import rig_effects
     if params is None:
         params = rig_effects.draw_effects(list(effects), seed, LAYOUT) if effects else {}
     if artefacts and not isinstance(artefacts, dict):
-        from lss_fmu.layouts import load_track
         artefacts = rig_effects.draw_artefacts(list(artefacts), seed, float(load_track(LAYOUT).length))
     sim = LazySimulator()
     kw = {}

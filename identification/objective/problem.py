@@ -24,9 +24,14 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from lss_fmu.design import COR_BOUNDS, CORS, DESIGN, BY_SYMBOL, is_effect_parameter, symbol
-from lss_fmu.protocol import Protocol
+from lss_fmu.layouts import load_track
+from lss_fmu.protocol import Protocol, TRANSIENT_TOLERANCE
 from lss_fmu.runner import LazySimulator
+from lss_fmu.sensor import OFFSET_STD, interp_cubic
+from lss_fmu.triggered import arriving_cart, sample_rate_of, simulate_from_rest, simulate_triggered
 from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS
+
+from .features import stat_errors
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +161,6 @@ class IdentificationProblem:
         simulated (no sensor model), the protocol followed: the set point on
         its schedule, the chain from rest (start-up) or past the photocell
         after its run-in (the others). Raises on failure."""
-        from lss_fmu.triggered import simulate_from_rest, simulate_triggered
         params, s_m = self.fmu_params(x)
         params.update(extra or {})
         times = self.times if times is None else times
@@ -175,13 +179,11 @@ class IdentificationProblem:
 
     @cached_property
     def track_length(self) -> float:
-        from lss_fmu.layouts import load_track
         return float(load_track(self.layout).length)
 
     @property
     def rate(self) -> float:
         """The sample rate, Hz: declared, or read off the times."""
-        from lss_fmu.triggered import sample_rate_of
         return float(self.sample_rate) if self.sample_rate else sample_rate_of(self.times)
 
     def simulate(self, x: Sequence[float], extra: Optional[Mapping[str, object]] = None) -> np.ndarray:
@@ -199,7 +201,6 @@ class IdentificationProblem:
         declares the logger's internal rate, interpolated onto that rate's grid
         and filtered at it, as the logger does."""
         from scipy import signal
-        from lss_fmu.sensor import interp_cubic
         order, cutoff, causal = self.anti_alias
         h = 0.5 / self.rate
         refilter = bool(self.filter_rate) and abs(self.filter_rate * h - 1.0) > 1e-9
@@ -236,7 +237,6 @@ class IdentificationProblem:
         """H_j per channel: Eq. 11-12 (pointwise), or the statistical H_j^stat
         of identification.objective.features (objective = "statistics")."""
         if self.objective == "statistics":
-            from .features import stat_errors
             return stat_errors(self.samples, self.simulate(x), self.rate, self.tare)
         if self.objective == "likelihood":
             return np.sqrt(np.mean(tared(self.samples - self.simulate(x), self.tare) ** 2, axis=0)) / self.noise
@@ -284,7 +284,6 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
     solver's error would otherwise exceed what the CoRs do). `tare`: take out
     zero errors within 3 sigma of the transducer's declared offset (meta.json
     sensor.force_offset_std_N, else the virtual cart's)."""
-    from lss_fmu.protocol import TRANSIENT_TOLERANCE
     protocol = meas.protocol
     settle = protocol.run_in if settle is None else float(settle)
     if tolerance is None and protocol.transient:
@@ -382,7 +381,6 @@ def transducer_for(track, s_m: float, v: float, settle: float) -> int:
     before 1 s, so that s_M and v_s anywhere within their bounds still come
     after it): every evaluation then simulates settle + ~1.5 s + the record,
     not up to a lap more (cart 0 on the field set's layout 3: 117-176 s)."""
-    from lss_fmu.triggered import arriving_cart
     return arriving_cart(float(track.length), int(track.n_carts), s_m, max(abs(v), 0.1), settle + 1.5,
                          earliest=settle + 1.0)[0]
 
@@ -406,7 +404,6 @@ def noise_of(meas) -> np.ndarray:
 
 def tare_of(meta: Optional[Mapping] = None) -> np.ndarray:
     """3 sigma of the declared zero error per force channel, N."""
-    from lss_fmu.sensor import OFFSET_STD
     spec = dict(OFFSET_STD)
     declared = ((meta or {}).get("sensor") or {}).get("force_offset_std_N") or {}
     spec.update({k: float(v) for k, v in declared.items() if k in spec})
