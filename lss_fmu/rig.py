@@ -20,8 +20,8 @@ measurement folder (lss_fmu.measurement). The truth goes to DIR/answers/,
 which identification never reads.
 
     DIR/set.json               the set: name, seed, FMU hash, generation times
-    DIR/m01/ ... DIR/m22/      measurement folders (samples.csv, meta.json)
-    DIR/answers/m01/truth.json the truth of each measurement
+    DIR/mNN/                   measurement folders, NN the measurement's number (samples.csv, meta.json)
+    DIR/answers/mNN/truth.json the truth of each measurement
     DIR/answers/tracks/*.layout  the as-built tracks of the field set
     DIR/fmu/LSSChain-<sha>.fmu the FMU that generated the set
 

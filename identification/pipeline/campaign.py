@@ -29,7 +29,6 @@ import json
 import logging
 import re
 import time
-import tomllib
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,7 +40,7 @@ from lss_fmu.measurement import find_measurements, load_measurement
 from tqdm import tqdm
 
 from .driver import RecordsError, build_problem, check_records, identify_records
-from .settings import Settings
+from .settings import Settings, read_toml
 
 log = logging.getLogger(__name__)
 
@@ -99,13 +98,7 @@ def sorters_in(data_dirs: Sequence[Union[str, Path]]) -> list:
 def sorters_of_manifest(path: Union[str, Path]) -> list:
     """The sorters a manifest's [sorters] table names (paths relative to the file)."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CampaignError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise CampaignError(f"{path}: not TOML: {exc}") from None
-    table = data.get("sorters")
+    table = read_toml(path, CampaignError).get("sorters")
     if not isinstance(table, dict) or not table:
         raise CampaignError(f"{path}: needs a [sorters] table of name = [record folders]")
     out = []

@@ -106,17 +106,22 @@ def settings_from(mapping: Mapping[str, Any], where: str = "settings",
     return dataclasses.replace(base, **values)
 
 
+def read_toml(path: Path, error: type = ValueError) -> dict:
+    """A TOML file's tables; an unreadable or malformed file raises `error` naming it."""
+    try:
+        return tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: not TOML: {exc}") from None
+
+
 def load_settings(path: Union[str, Path, None]) -> Settings:
     """The settings of a TOML file's [identify] table (None: the defaults)."""
     if path is None:
         return Settings()
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise SettingsError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SettingsError(f"{path}: not TOML: {exc}") from None
+    data = read_toml(path, SettingsError)
     extra = sorted(set(data) - {"identify"})
     if extra:
         raise SettingsError(f"{path}: unknown table [{extra[0]}]: the settings live in [identify]")
