@@ -30,7 +30,9 @@ DEFAULT_OUTPUTS = FORCE_CHANNELS + SPEED_CHANNELS + ["transducer.s", "chain.v_me
 # what may change after initialisation, with the FMU's default: a relaxed chain at rest serves every value
 TUNABLE = {v.name: v.start for v in VARIABLES if v.causality in ("parameter", "input")
            and v.variability in ("tunable", "continuous")}
-REST_STATES = 4     # relaxed chains kept per simulator
+REST_STATES = 12    # relaxed chains kept per simulator: a central Jacobian's (its base, and up to four steps of
+                    # each of the two variables the equilibrium depends on, d and s_M) stay while it runs;
+                    # a snapshot is about 40 doubles per cart (0.2 MB at 685 carts)
 
 
 class SimulationError(RuntimeError):

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 import dataclasses
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Mapping, Optional, Sequence
@@ -41,6 +42,8 @@ BAD_VALUE = 100.0  # worse than any simulation that ran (7 channels at NRMSD ~3.
 # the other objectives are not bounded like Eq. 10-12 (the likelihood's f is ~7 at the truth and
 # thousands far from it): a failed simulation must still rank below every one that ran
 BAD_VALUES = {"pointwise": BAD_VALUE, "statistics": 1e12, "likelihood": 1e12}
+MEMO_BYTES = 8 << 20   # simulations kept per problem, the newest first: a central Jacobian's (its base and two
+                       # to five runs per variable) fit many times over on a transient window (84 kB each at 2.5 s)
 
 
 def tared(residual: np.ndarray, tare: Optional[np.ndarray]) -> np.ndarray:
@@ -90,6 +93,8 @@ class IdentificationProblem:
                                          # likelihood: RMSD over the declared noise
     noise: Optional[np.ndarray] = None   # per force channel, N: the sensor's white noise (likelihood)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
+    # the last simulations, by everything they depend on (see simulate); not copied by replace, not pickled
+    _memo: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if self.objective not in OBJECTIVES:
@@ -188,10 +193,38 @@ class IdentificationProblem:
 
     def simulate(self, x: Sequence[float], extra: Optional[Mapping[str, object]] = None) -> np.ndarray:
         """The 7 forces as the logger records them at the measured sample times
-        (through its anti-alias filter when the record declares one); raises on failure."""
-        if self.anti_alias is None:
-            return self.run(x, extra)
-        return self._through_filter(x, extra)
+        (through its anti-alias filter when the record declares one); raises on failure.
+
+        A simulation is a function of what it is run with: asked again with
+        the same FMU values, window and protocol it is not run again (the
+        last ones, up to MEMO_BYTES, are kept; a copy is returned). A joint problem's Jacobian
+        column of one record's trigger point then runs that record alone,
+        and a point evaluated twice by two stages runs once."""
+        key = self._memo_key(x, extra)
+        kept = self._memo.get(key)
+        if kept is not None:
+            self._memo.move_to_end(key)
+            return kept.copy()
+        y = self.run(x, extra) if self.anti_alias is None else self._through_filter(x, extra)
+        self._memo[key] = np.array(y, float)
+        while sum(a.nbytes for a in self._memo.values()) > MEMO_BYTES and len(self._memo) > 1:
+            self._memo.popitem(last=False)
+        return y
+
+    def _memo_key(self, x, extra) -> tuple:
+        """Everything a simulation depends on: the FMU values (the design's and
+        the fixed ones), the trigger point, the solver, the sample times, the
+        logger's filter, the protocol and the FMU file."""
+        params, s_m = self.fmu_params(x)
+        params.update(extra or {})
+        return (repr(sorted(params.items())), s_m, self.tolerance, self.settle, hash(self.times.tobytes()),
+                len(self.times), self.anti_alias, self.filter_rate, self.sample_rate, repr(self.protocol),
+                self.v_nominal, getattr(self.sim, "fmu", None))
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_memo"] = OrderedDict()   # a copy in another process simulates for itself
+        return state
 
     def _through_filter(self, x, extra) -> np.ndarray:
         """The simulation through the logger's declared anti-alias filter, from
