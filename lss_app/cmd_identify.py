@@ -25,7 +25,8 @@ def register(sub, common) -> None:
                     help="an expert's settings file, table [identify] (identification.pipeline.settings; default: the "
                          "method of the recovery table)")
     ap.add_argument("--seed", type=int, default=0, help="the optimiser's seed (default 0)")
-    ap.add_argument("--workers", type=int, default=1, help="parallel evaluations of a steady record's complex")
+    ap.add_argument("--workers", type=int, default=1, help="local processes for simulations side by side: the complex's candidates, the Jacobians' "
+                         "columns (default 1; the result is the same)")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.set_defaults(run=run)
 

@@ -30,6 +30,7 @@ DEFAULT_OUTPUTS = FORCE_CHANNELS + SPEED_CHANNELS + ["transducer.s", "chain.v_me
 # what may change after initialisation, with the FMU's default: a relaxed chain at rest serves every value
 TUNABLE = {v.name: v.start for v in VARIABLES if v.causality in ("parameter", "input")
            and v.variability in ("tunable", "continuous")}
+_PROCESS_SIMULATORS: dict = {}   # (FMU path, pid) -> the simulator copies sent to this process share
 REST_STATES = 12    # relaxed chains kept per simulator: a central Jacobian's (its base, and up to four steps of
                     # each of the two variables the equilibrium depends on, d and s_M) stay while it runs;
                     # a snapshot is about 40 doubles per cart (0.2 MB at 685 carts)
@@ -324,15 +325,25 @@ class ChainSimulator:
 class LazySimulator:
     """The simulator of the process that uses it, made on first use: a problem
     carries one and calls it for its FMU instance. It pickles to its FMU path
-    only, so a copy sent to a worker process makes that worker's own instance
-    (one per process, reused with fmi2Reset run after run)."""
+    only; a copy sent to another process (a worker's task) uses that
+    process's one simulator of the FMU, made on the first task and reused by
+    every later one with fmi2Reset, its relaxed chains kept: a task costs its
+    simulation, not an FMU's extraction and instantiation."""
 
-    def __init__(self, fmu: Optional[Path] = None):
+    def __init__(self, fmu: Optional[Path] = None, shared: bool = False):
         self.fmu = None if fmu is None else str(fmu)
+        self.shared = shared
         self._sim: Optional[ChainSimulator] = None
         self._pid: Optional[int] = None
 
     def __call__(self) -> ChainSimulator:
+        if self.shared:
+            key = (self.fmu, os.getpid())
+            sim = _PROCESS_SIMULATORS.get(key)
+            if sim is None or sim._closed:
+                sim = _PROCESS_SIMULATORS[key] = ChainSimulator(None if self.fmu is None else Path(self.fmu),
+                                                                instance_name=f"lss{os.getpid()}")
+            return sim
         if self._sim is None or self._pid != os.getpid():
             self._sim = ChainSimulator(None if self.fmu is None else Path(self.fmu),
                                        instance_name=f"lss{os.getpid()}")
@@ -340,6 +351,7 @@ class LazySimulator:
         return self._sim
 
     def close(self) -> None:
+        """Frees this problem's instance (a process's shared one lives as long as the process)."""
         if self._sim is not None and self._pid == os.getpid():
             self._sim.close()
         self._sim = self._pid = None
@@ -348,7 +360,7 @@ class LazySimulator:
         return {"fmu": self.fmu}
 
     def __setstate__(self, state):
-        self.__init__(state["fmu"])
+        self.__init__(state["fmu"], shared=True)
 
     def __repr__(self) -> str:
         return f"LazySimulator({self.fmu or 'build/LSSChain.fmu'})"

@@ -386,3 +386,23 @@ def test_map_fn_may_return_plain_objective_values():
     res = minimize_complex_parallel(flaky_sphere, bounds, seed=3, n_parallel=3, map_fn=plain_map)
     ref = minimize_complex_parallel(flaky_sphere, bounds, seed=3, n_parallel=3)
     assert np.array_equal(res.history.x, ref.history.x) and res.n_bad == ref.n_bad > 0
+
+
+def test_a_point_asked_again_counts_in_the_parallel_run_as_in_the_serial_one():
+    """A retraction clipped onto a corner asks for the same point again: the
+    serial method counts it each time, and so does the speculative parallel
+    run, which answers it without a new evaluation (same run, same count)."""
+    def corner(x):
+        return float(np.sum(x))
+    for seed in range(4):
+        a = minimize_complex(corner, [(0.0, 1.0)] * 2, seed=seed, max_evals=60)
+        calls = []
+        p = minimize_complex_parallel(lambda x: calls.append(1) or corner(x), [(0.0, 1.0)] * 2, seed=seed,
+                                      max_evals=60, n_parallel=3, strategy="speculative",
+                                      map_fn=lambda fn, xs: list(map(fn, xs)))
+        used = p.history.path_index >= 0
+        order = np.argsort(p.history.path_index[used])
+        assert len(a.history.x) > len(np.unique(a.history.x, axis=0))   # the case: a point asked again
+        assert a.nfev_used == p.nfev_used and a.message == p.message
+        assert np.array_equal(a.history.x, p.history.x[used][order])
+        assert p.nfev == len(calls)

@@ -10,7 +10,7 @@ import pytest
 
 from identification.objective.problem import from_measurement
 from lss_fmu import measurement as M
-from lss_fmu.protocol import Protocol, from_meta
+from lss_fmu.protocol import TRANSIENT_TOLERANCE, Protocol, from_meta
 from lss_fmu.rig import load_truth, true_design_values
 from test_measurement import make_meta, make_samples
 
@@ -91,7 +91,7 @@ def test_the_rig_writes_what_the_engineer_did(start_up):
 
 def test_the_problem_follows_the_record(start_up):
     p = from_measurement(start_up, "LW", tare=True)
-    assert p.protocol.from_rest and p.tolerance == 1e-6
+    assert p.protocol.from_rest and p.tolerance == TRANSIENT_TOLERANCE
     t = load_truth(start_up)
     vals = true_design_values(t)
     xt = np.array([vals[n] for n in p.free])

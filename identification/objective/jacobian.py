@@ -17,12 +17,13 @@ from typing import Optional
 
 import numpy as np
 
+from .parallel import Failed, simulate_all
 from .problem import IdentificationProblem
 
 log = logging.getLogger(__name__)
 
 REL_STEP = 0.02                # difference step, of the bound range: the response to it stands well
-                               # above the solver's error at tolerance 1e-6 (docs/identification.md)
+                               # above the solver's error at the transient tolerance (lss_fmu.protocol)
 RESPONSE = 5.0                 # the change a difference step aims at, in noise levels
 MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound range
 
@@ -41,12 +42,17 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     lengthened until the simulation moves by about RESPONSE in the metric of
     `weights` (a few noise levels: far above the solver's error, far below the
     nonlinearity of a variable the record pins to a thousandth of its range,
-    such as the pretension)."""
+    such as the pretension).
+
+    The simulations run in rounds (each column's first step, its rescaled
+    steps, its second step), side by side on the problem's pool when it has
+    one (identification.objective.parallel): the same points either way."""
     lo, hi = np.array(problem.bounds_array, float).T
     wt = np.ones(sim0.shape[1]) if weights is None else np.asarray(weights, float)
-    J = np.zeros(sim0.shape + (len(x),))
-    used = np.zeros(len(x))
-    rough = np.zeros(len(x))
+    n = len(x)
+    J = np.zeros(sim0.shape + (n,))
+    used = np.zeros(n)
+    rough = np.zeros(n)
 
     def norm(a):
         return float(np.sqrt(np.sum(a ** 2 * wt)))
@@ -54,36 +60,54 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     def at(k, h):
         xh = np.array(x, float)
         xh[k] += h
-        return problem.simulate(xh)
-    for k in range(len(x)):
-        span = hi[k] - lo[k]
-        try:
-            h = float(steps[k]) if steps is not None and steps[k] > 0 else rel_step * span
-            sgn = 1.0 if x[k] + h <= hi[k] else -1.0
-            y1 = at(k, sgn * h)
-            if steps is None:
-                for _ in range(3):   # scale the step to the response (linear guess), at most 3 tries
-                    resp = norm(y1 - sim0)
-                    if 0.25 * RESPONSE <= resp <= 4.0 * RESPONSE or resp == 0:
-                        break
-                    h = float(np.clip(h * RESPONSE / resp, MIN_STEP * span, MAX_STEP * span))
-                    sgn = 1.0 if x[k] + h <= hi[k] else -1.0
-                    y1 = at(k, sgn * h)
-            if sgn > 0 and x[k] - h >= lo[k]:
-                fwd, bwd = (y1 - sim0) / h, (sim0 - at(k, -h)) / h
-                J[:, :, k] = 0.5 * (fwd + bwd)
-                m = norm(J[:, :, k])
-                rough[k] = norm(fwd - bwd) / m if m > 0 else np.inf
-            else:  # at a bound: two steps inwards, their differences compared
-                d1 = sgn * (y1 - sim0) / h
-                d2 = sgn * (at(k, 2 * sgn * h) - y1) / h
-                J[:, :, k] = d1
-                m = norm(0.5 * (d1 + d2))
-                rough[k] = norm(d1 - d2) / m if m > 0 else np.inf
-            used[k] = h
-        except Exception as exc:  # the variable then counts as not identifiable
-            log.warning("jacobian column %s failed: %s", problem.free[k], exc)
-            rough[k] = np.inf
+        return xh
+
+    def run(points: dict) -> dict:
+        """Column -> simulation at its point, one round (side by side on the problem's pool)."""
+        ys = simulate_all(problem, list(points.values()), base=(x, sim0))
+        out = {}
+        for k, y in zip(points, ys):
+            if isinstance(y, Failed):   # the variable then counts as not identifiable
+                log.warning("jacobian column %s failed: %s", problem.free[k], y.message)
+                rough[k] = np.inf
+            else:
+                out[k] = y
+        return out
+
+    span = hi - lo
+    h = np.array([float(steps[k]) if steps is not None and steps[k] > 0 else rel_step * span[k] for k in range(n)])
+    sgn = np.where(x + h <= hi, 1.0, -1.0)
+    y1 = run({k: at(k, sgn[k] * h[k]) for k in range(n)})
+    if steps is None:
+        for _ in range(3):   # scale each step to the response (linear guess), at most 3 tries
+            again = {}
+            for k, y in y1.items():
+                resp = norm(y - sim0)
+                if 0.25 * RESPONSE <= resp <= 4.0 * RESPONSE or resp == 0:
+                    continue
+                h[k] = float(np.clip(h[k] * RESPONSE / resp, MIN_STEP * span[k], MAX_STEP * span[k]))
+                sgn[k] = 1.0 if x[k] + h[k] <= hi[k] else -1.0
+                again[k] = at(k, sgn[k] * h[k])
+            if not again:
+                break
+            for k in again:
+                del y1[k]
+            y1.update(run(again))
+    central = {k for k in y1 if sgn[k] > 0 and x[k] - h[k] >= lo[k]}
+    y2 = run({k: at(k, -h[k]) if k in central else at(k, 2 * sgn[k] * h[k]) for k in sorted(y1)})
+    for k in sorted(y2):
+        if k in central:
+            fwd, bwd = (y1[k] - sim0) / h[k], (sim0 - y2[k]) / h[k]
+            J[:, :, k] = 0.5 * (fwd + bwd)
+            m = norm(J[:, :, k])
+            rough[k] = norm(fwd - bwd) / m if m > 0 else np.inf
+        else:  # at a bound: two steps inwards, their differences compared
+            d1 = sgn[k] * (y1[k] - sim0) / h[k]
+            d2 = sgn[k] * (y2[k] - y1[k]) / h[k]
+            J[:, :, k] = d1
+            m = norm(0.5 * (d1 + d2))
+            rough[k] = norm(d1 - d2) / m if m > 0 else np.inf
+        used[k] = h[k]
     return J, used, rough
 
 
@@ -91,17 +115,21 @@ def one_sided_jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.n
                   rel_step: float = REL_STEP) -> list:
     """One-sided differences of the simulation in each free variable, towards the
     inside of the bounds; a failed run gives no column."""
-    cols = []
+    steps, points = [], []
     for k, (lo, hi) in enumerate(problem.bounds_array):
         h = rel_step * (hi - lo)
         if x[k] + h > hi:
             h = -h
         xk = np.array(x, float)
         xk[k] += h
-        try:
-            cols.append((problem.simulate(xk) - sim0) / h)
-        except Exception as exc:
-            log.warning("base column %s failed: %s", problem.free[k], exc)
+        steps.append(h)
+        points.append(xk)
+    cols = []
+    for k, (h, y) in enumerate(zip(steps, simulate_all(problem, points, base=(x, sim0)))):
+        if isinstance(y, Failed):
+            log.warning("base column %s failed: %s", problem.free[k], y.message)
+        else:
+            cols.append((y - sim0) / h)
     return cols
 
 

@@ -24,6 +24,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 
 from lss_fmu.design import TRIGGER
+from lss_fmu.variables import FORCE_CHANNELS
 
 from .problem import IdentificationProblem
 
@@ -131,6 +132,21 @@ class JointProblem:
 
     def simulate(self, x: Sequence[float], extra: Optional[Mapping[str, object]] = None) -> np.ndarray:
         return np.hstack([p.simulate(self.part_x(k, x), extra) for k, p in enumerate(self.parts)])
+
+    def remember(self, x: Sequence[float], y: np.ndarray) -> None:
+        """Keep `y` (the records side by side) as the simulation at x: each record its own columns."""
+        n = len(FORCE_CHANNELS)
+        for k, p in enumerate(self.parts):
+            p.remember(self.part_x(k, x), np.asarray(y)[:, k * n:(k + 1) * n])
+
+    @property
+    def pool(self):
+        return self.parts[0].pool
+
+    @pool.setter
+    def pool(self, executor) -> None:
+        for p in self.parts:
+            p.pool = executor
 
     def channel_errors(self, x: Sequence[float]) -> np.ndarray:
         """Per force channel over the records: sqrt(sum_k H_kj^2), so that

@@ -17,6 +17,8 @@ from __future__ import annotations
 import logging
 import math
 import dataclasses
+import hashlib
+import pickle
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -93,6 +95,8 @@ class IdentificationProblem:
                                          # likelihood: RMSD over the declared noise
     noise: Optional[np.ndarray] = None   # per force channel, N: the sensor's white noise (likelihood)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
+    pool: Optional[object] = field(default=None, repr=False, compare=False)  # an Executor for simulations side by
+                                         # side (identification.objective.parallel); not pickled
     # the last simulations, by everything they depend on (see simulate); not copied by replace, not pickled
     _memo: OrderedDict = field(default_factory=OrderedDict, init=False, repr=False, compare=False)
 
@@ -206,10 +210,18 @@ class IdentificationProblem:
             self._memo.move_to_end(key)
             return kept.copy()
         y = self.run(x, extra) if self.anti_alias is None else self._through_filter(x, extra)
+        self._keep(key, y)
+        return y
+
+    def remember(self, x: Sequence[float], y: np.ndarray) -> None:
+        """Keep `y` as the simulation at x (one run elsewhere: a worker's)."""
+        self._keep(self._memo_key(x, None), y)
+
+    def _keep(self, key: tuple, y: np.ndarray) -> None:
         self._memo[key] = np.array(y, float)
+        self._memo.move_to_end(key)
         while sum(a.nbytes for a in self._memo.values()) > MEMO_BYTES and len(self._memo) > 1:
             self._memo.popitem(last=False)
-        return y
 
     def _memo_key(self, x, extra) -> tuple:
         """Everything a simulation depends on: the FMU values (the design's and
@@ -224,7 +236,12 @@ class IdentificationProblem:
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_memo"] = OrderedDict()   # a copy in another process simulates for itself
+        state["pool"] = None             # and is not a master of workers
         return state
+
+    def __dask_tokenize__(self) -> str:
+        """A Dask key of the problem: what it pickles to (not its pool, not its memo)."""
+        return hashlib.sha256(pickle.dumps(self)).hexdigest()
 
     def _through_filter(self, x, extra) -> np.ndarray:
         """The simulation through the logger's declared anti-alias filter, from
@@ -313,8 +330,8 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
     the record's protocol (meta.json `protocol`; none: steady running). `window`
     keeps only the first seconds of the record. `settle`: the run-in before the
     photocell is armed (default: the protocol's). `tolerance`: the solver's
-    (default: the FMU's, TRANSIENT_TOLERANCE for a transient record, where the
-    solver's error would otherwise exceed what the CoRs do). `tare`: take out
+    (default: the FMU's; lss_fmu.protocol.TRANSIENT_TOLERANCE for a transient
+    record, which keeps the solver's error well below what the CoRs do). `tare`: take out
     zero errors within 3 sigma of the transducer's declared offset (meta.json
     sensor.force_offset_std_N, else the virtual cart's)."""
     protocol = meas.protocol

@@ -185,6 +185,7 @@ class _Recorder:
         self.rows_round: list[int] = []
         self.rows_path: list[int] = []
         self.nfev_used = 0
+        self.n_repeat = 0   # rows that repeat a known evaluation (no call of the objective)
         self.errors: list[tuple[int, str]] = []
         self.its: dict[str, list] = {k: [] for k in
                                      ("iteration", "round", "nfev", "best_f", "worst_f", "f_spread", "x_spread")}
@@ -199,12 +200,14 @@ class _Recorder:
 
     @property
     def nfev(self) -> int:
-        return len(self.rows_f)
+        return len(self.rows_f) - self.n_repeat
 
     def record(self, x: np.ndarray, out: tuple[float, bool, str | None], kind: str,
-               iteration: int, rnd: int, discarded: bool = False) -> int:
-        """Store one evaluation; ``discarded=True`` marks it unused until :meth:`use`."""
+               iteration: int, rnd: int, discarded: bool = False, repeat: bool = False) -> int:
+        """Store one evaluation; ``discarded=True`` marks it unused until :meth:`use`;
+        ``repeat=True``: a row for a point asked again, its value known (not an evaluation)."""
         f, bad, err = out
+        self.n_repeat += bool(repeat)
         idx = len(self.rows_f)
         self.rows_x.append(np.array(x, dtype=float))
         self.rows_f.append(float(f))
@@ -260,7 +263,7 @@ class _Recorder:
             self.bar.close()
 
     def history(self) -> ComplexHistory:
-        n = self.nfev
+        n = len(self.rows_f)   # every row, repeats included
         its = {
             k: np.asarray(v, dtype=int if k in ("iteration", "round", "nfev") else float)
             for k, v in self.its.items()

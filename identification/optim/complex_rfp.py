@@ -478,6 +478,11 @@ def _run_speculative(ctx: _Ctx, X: np.ndarray, F: np.ndarray, rec: _Recorder, ev
                 if out is None:
                     break
                 idx = cache[x.tobytes()] = rec.record(x, out, machine.kind, machine.nit, -1, discarded=True)
+            elif rec.rows_path[idx] >= 0:
+                # asked again (a retraction clipped onto the same point): the serial method evaluates it
+                # again and counts it, so a new row with the known value, no new simulation
+                idx = rec.record(x, (rec.rows_f[idx], rec.rows_bad[idx], None), machine.kind, machine.nit, -1,
+                                 discarded=True, repeat=True)
             rec.use(idx)
             kind = machine.kind
             accepted, ended = machine.feed(f_of(idx))

@@ -92,11 +92,15 @@ def build_problem(records: Sequence, model: str, settings: Settings, sim=None):
 
 
 def identify_records(records: Sequence, model: str, settings: Optional[Settings] = None, *, seed=0,
-                     journal: Optional[Path] = None, progress: bool = False, workers: int = 1, problem=None):
+                     journal: Optional[Path] = None, progress: bool = False, workers: int = 1, executor=None,
+                     problem=None):
     """Identify `records` (loaded measurements of one sorter and protocol) with
     contact `model`; returns an identify.IdentificationResult whose `settings`
     and `method` say how (to_dict() carries both). `problem`: one already
-    built by build_problem (else it is built here)."""
+    built by build_problem (else it is built here). `workers` local
+    processes, or an `executor` (a Dask client's get_executor()), run a
+    transient identification's independent simulations side by side, the
+    result the serial one's; a steady record's complex takes `workers`."""
     settings = settings or Settings()
     if problem is None:
         problem = build_problem(records, model, settings)
@@ -104,7 +108,8 @@ def identify_records(records: Sequence, model: str, settings: Optional[Settings]
     if method == "grown":
         res = identify_grown(problem, max_evals=settings.max_evals, seed=seed, journal=journal, progress=progress,
                              restarts=settings.restarts, refine_evals=settings.refine_evals, uncertainty=True,
-                             shrink=settings.shrink, start=settings.start, first=settings.first_window)
+                             shrink=settings.shrink, start=settings.start, first=settings.first_window,
+                             workers=workers, executor=executor)
     else:
         res = identify(problem, max_evals=settings.steady_evals, seed=seed, journal=journal, progress=progress,
                        workers=workers)

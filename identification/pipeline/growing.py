@@ -77,7 +77,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
          reset_unseen: bool = False, start: Optional[Sequence[float]] = None,
-         retry: Optional[Callable[[], tuple]] = None) -> tuple:
+         retry: Optional[Callable[[], tuple]] = None, workers: int = 1) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -107,7 +107,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     point, and the better of the two goes on (`info["retry"]`). Where the
     complex's first window is at the noise nothing changes. Every window's
     entry lists the records whose S at its end lies RETRY_Z sd above the
-    noise (`records_off`).
+    noise (`records_off`). `workers`: the complex's candidates side by side
+    (identify; the serial run's result).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -117,7 +118,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     q1 = dataclasses.replace(q, free=tuple(n for n in problem.free if n not in hold),
                              fixed={**q.fixed, **{n: problem.x0[n] for n in hold}}) if hold else q
     if start is None:
-        res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal)
+        res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal,
+                       workers=workers)
         x1 = np.asarray(res.x, float)
         nfev = int(getattr(res, "nfev", evals))
     else:

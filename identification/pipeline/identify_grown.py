@@ -33,6 +33,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ..objective.joint import JointProblem
+from ..objective.parallel import pooled
 from ..objective.problem import LINEARISABLE
 from .edge_probe import edge_probes
 from .growing import FIRST, grow, records_off
@@ -50,7 +51,8 @@ PROFILE_POINTS = 9   # the profile of the least-determined variable on the first
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
                    progress: bool = False, restarts: int = 0, refine_evals: int = 400,
                    uncertainty: bool = False, shrink: bool = False,
-                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "auto"):
+                   ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "auto",
+                   workers: int = 1, executor=None):
     """The problem (an IdentificationProblem or a joint one) identified over
     a growing window: `max_evals` complex evaluations on the first `first`
     seconds, the profile there, Levenberg-Marquardt over growing windows in
@@ -75,7 +77,10 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     (identification.pipeline.edge_probe; with `uncertainty` and `refine_evals`).
     `progress`: a bar over the stages (the grown windows, the refinement
     and intervals, the shorter windows, the edge probes, each restart), with
-    f after each."""
+    f after each. `workers` (local processes) or `executor` (a Dask
+    client's, say): the complex's candidates and the Jacobians' columns side
+    by side (identification.objective.parallel); the result is the serial
+    run's, bit for bit."""
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE:
         raise ValueError(f"grown identification: the {problem.objective} objective is not a sum of squares "
                          f"(use one of {', '.join(LINEARISABLE)})")
@@ -93,9 +98,12 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     t0 = time.time()
     bar = tqdm(total=len(STAGES), desc=f"{problem.name}", unit="stage", leave=False) if progress else None
     once = dict(max_evals=max_evals, refine_evals=refine_evals, uncertainty=uncertainty, shrink=shrink,
-                ladder=ladder, first=first, start=start, tick=_ticker(bar))
+                ladder=ladder, first=first, start=start, tick=_ticker(bar), workers=max(1, int(workers)))
     try:
-        return _restarted(problem, seed, journal, int(restarts), once, bar, t0)
+        with pooled(problem, workers, executor):
+            res = _restarted(problem, seed, journal, int(restarts), once, bar, t0)
+        res.problem.pool = None   # a shorter window's problem made inside: its pool is gone with the run
+        return res
     finally:
         if bar is not None:
             bar.close()
@@ -181,7 +189,8 @@ def _safe_f(q, x) -> float:
         return float("inf")
 
 
-def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start, tick):
+def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start, tick,
+          workers):
     """One grown identification (identify_grown without restarts)."""
     t0 = time.time()
     x0 = problem.x0_vector()
@@ -193,17 +202,17 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     x_start, started = None, None
     if start == "single" and isinstance(problem, JointProblem) and w is not None:
         x_start, started = single_start(problem, w, evals=int(max_evals), first=first, seed=seed, journal=journal,
-                                        profile_points=PROFILE_POINTS)
+                                        profile_points=PROFILE_POINTS, workers=workers)
     retry, box = None, {}
     if start == "auto" and isinstance(problem, JointProblem) and w is not None:
         def single_retry():
             box["x"], box["info"] = single_start(problem, w, evals=int(max_evals), first=first, seed=seed,
-                                                 journal=journal, profile_points=PROFILE_POINTS)
+                                                 journal=journal, profile_points=PROFILE_POINTS, workers=workers)
             return box["x"], box["info"]["nfev"]
         retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start, retry=retry)
+                   start=x_start, retry=retry, workers=workers)
     tick("grown", float(info["windows"][-1]["S_per_sample"]) * problem.samples.size)
     if started is not None:
         info["nfev"] += started["nfev"]

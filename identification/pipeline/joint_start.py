@@ -69,7 +69,7 @@ def trigger_scan(part, values: dict, w: np.ndarray, first: float) -> tuple:
 
 
 def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
-                 journal: Optional[Path] = None, profile_points: int = 9) -> tuple:
+                 journal: Optional[Path] = None, profile_points: int = 9, workers: int = 1) -> tuple:
     """(x, info): the joint `problem`'s start (module docstring); `w` the
     joint metric (1 / sigma^2 per column, the records side by side); `info`
     the first record's trail, each further record's trigger point and S on
@@ -78,7 +78,7 @@ def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
     first_part = problem.parts[0]
     jr = None if journal is None else Path(journal).with_name(Path(journal).stem + ".single.jsonl")
     x0, info = grow(first_part, evals=evals, first=first, seed=seed, journal=jr, channel_weights=w[:n],
-                    profile_points=profile_points, reset_unseen=True, keep_points=True)
+                    profile_points=profile_points, reset_unseen=True, keep_points=True, workers=workers)
     # its point at the longest window still at the noise: past the onset of chaos the trail is carried
     # off (the first record of one layout-6 fit: 1.03 per sample up to 0.9 s, 7.5 on its whole 2.5 s)
     t0 = float(first_part.times[0])
