@@ -169,3 +169,16 @@ def code_version() -> str:
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return rev + ("+changes" if dirty else "")
+
+
+def write_between(doc: Path, tag: str, text: str) -> None:
+    """Put `text` into `doc` between <!-- TAG:begin --> and <!-- TAG:end -->
+    (the prose around them is kept); an error naming the file and the markers
+    if they are missing."""
+    begin, end = f"<!-- {tag}:begin -->", f"<!-- {tag}:end -->"
+    old = Path(doc).read_text()
+    if begin not in old or end not in old:
+        raise SystemExit(f"{doc} has no {begin} ... {end} block")
+    head, rest = old.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    Path(doc).write_text(head + begin + "\n" + text.strip("\n") + "\n" + end + tail)

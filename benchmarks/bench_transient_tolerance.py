@@ -12,6 +12,7 @@ identification can use.
     .venv/bin/python benchmarks/bench_transient_tolerance.py --measurements 20,1,9 \\
         --json benchmarks/results/transient_tolerance.json
     .venv/bin/python benchmarks/bench_transient_tolerance.py --table --json benchmarks/results/transient_tolerance.json
+    .venv/bin/python benchmarks/bench_transient_tolerance.py --doc --json benchmarks/results/transient_tolerance.json
 """
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from bench_common import ROOT, write_between  # noqa: E402
 from profile_identification import records_of  # noqa: E402
 from identification import Settings  # noqa: E402
 from identification.objective.jacobian import jacobian  # noqa: E402
@@ -39,6 +41,7 @@ from lss_fmu.rig import load_truth, parse_numbers, true_design_values  # noqa: E
 TOLERANCES = (1e-6, 3e-6, 1e-5, 3e-5, 1e-4)
 METHODS = {0: "DOPRI5", 1: "DOP853"}
 REFERENCE = (1e-9, 1)
+BASE_TOL = 1e-6   # the CPU column's unit: DOPRI5 at the tolerance the identification used before
 REPEATS = 3   # CPU: the least of this many runs
 
 
@@ -89,14 +92,15 @@ def table(entry: dict) -> str:
     cors = [symbol(n) for n in CORS]
     out = []
     for m in entry["results"]:
-        base = next(r for r in m["rows"] if r["method"] == "DOPRI5" and r["tol"] == m["default_tolerance"])
+        base = next(r for r in m["rows"] if r["method"] == "DOPRI5" and r["tol"] == BASE_TOL)
         out.append(f"\n**{m['layout']}** (measurement {m['measurement']}, {m['window_s']:.2g} s, f at the truth "
                    f"{m['f_reference']:.4f} with the reference)\n")
-        out.append("| pair | tolerance | CPU / DOPRI5 at " + f"{m['default_tolerance']:g} | error, sigma | f | "
+        out.append(f"| pair | tolerance | CPU / DOPRI5 at {BASE_TOL:g} | error, sigma | f | "
                    + " | ".join(f"{c} shift" for c in cors) + " |")
         out.append("|" + "---|" * (5 + len(cors)))
         for r in m["rows"]:
-            out.append(f"| {r['method']} | {r['tol']:g} | {r['cpu_s'] / base['cpu_s']:.2f} | {r['error_sigma']:.4f} | "
+            mark = " (default)" if r["method"] == "DOPRI5" and r["tol"] == m["default_tolerance"] else ""
+            out.append(f"| {r['method']} | {r['tol']:g}{mark} | {r['cpu_s'] / base['cpu_s']:.2f} | {r['error_sigma']:.4f} | "
                        f"{r['f']:.4f} | " + " | ".join(f"{r['shift'][c]:+.4f}" for c in cors) + " |")
     return "\n".join(out)
 
@@ -106,10 +110,15 @@ def main(argv=None) -> int:
     ap.add_argument("--measurements", default="20,1,9")
     ap.add_argument("--work", default="build/bench_recovery")
     ap.add_argument("--json", default=None)
-    ap.add_argument("--table", action="store_true")
+    ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
+    ap.add_argument("--doc", action="store_true", help="write them into docs/benchmarks.md and stop")
     args = ap.parse_args(argv)
-    if args.table:
-        print(table(json.loads(Path(args.json).read_text())))
+    if args.table or args.doc:
+        text = table(json.loads(Path(args.json).read_text()))
+        if args.doc:
+            write_between(ROOT / "docs" / "benchmarks.md", "tolerance", text)
+        else:
+            print(text)
         return 0
     results = [measure(n, Path(args.work)) for n in parse_numbers(args.measurements)]
     entry = {"command": " ".join(sys.argv), "reference": {"tol": REFERENCE[0], "method": METHODS[REFERENCE[1]]},

@@ -11,6 +11,8 @@ simulations run and the seconds they simulated.
     .venv/bin/python benchmarks/profile_identification.py --measurements 20,1,9 \\
         --json benchmarks/results/profile_identification.json
     .venv/bin/python benchmarks/profile_identification.py --table --json benchmarks/results/profile_identification.json
+    .venv/bin/python benchmarks/profile_identification.py --doc \
+        --json benchmarks/results/profile_identification_before.json benchmarks/results/profile_identification.json
 
 The records are the recovery bench's (`--work`, made if missing). Stages are
 found by wrapping the pipeline's stage functions for the run; a stage nested
@@ -35,7 +37,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench_common import hash_sources  # noqa: E402
+from bench_common import ROOT, hash_sources, write_between  # noqa: E402
 from bench_recovery import set_fmu  # noqa: E402
 from identification import Settings  # noqa: E402
 from identification.pipeline import (driver, growing, identify, identify_grown, windowing,  # noqa: E402
@@ -227,12 +229,21 @@ def main(argv=None) -> int:
     ap.add_argument("--measurements", default="20,1,9", help="recovery measurements (default: layouts 7, 1, 3)")
     ap.add_argument("--work", default="build/bench_recovery")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--json", default=None)
+    ap.add_argument("--json", nargs="+", default=None, help="the profile's file (--doc: before and after)")
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
+    ap.add_argument("--doc", action="store_true", help="write the tables of the --json files (before, after) into "
+                    "docs/benchmarks.md and stop")
     args = ap.parse_args(argv)
-    if args.table:
-        print(table(json.loads(Path(args.json).read_text())))
+    if args.table or args.doc:
+        texts = [table(json.loads(Path(j).read_text())) for j in args.json]
+        if not args.doc:
+            print("\n".join(texts))
+            return 0
+        heads = ["#### Before", "#### After"] if len(texts) == 2 else [""] * len(texts)
+        write_between(ROOT / "docs" / "benchmarks.md", "profile",
+                      "\n".join(f"{h}\n{t}\n" for h, t in zip(heads, texts)))
         return 0
+    args.json = args.json[0] if args.json else None
     settings = Settings()
     old = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
     numbers = parse_numbers(args.measurements)
