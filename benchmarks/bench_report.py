@@ -18,10 +18,11 @@ import argparse
 import json
 from pathlib import Path
 
+from bench_common import write_between
+
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
 DOC = HERE.parent / "docs" / "benchmarks.md"
-BEGIN, END = "<!-- tables:begin -->", "<!-- tables:end -->"
 
 
 def load(name):
@@ -129,12 +130,7 @@ def main(argv=None):
     if a.print or not DOC.exists():
         print(t)
         return
-    text = DOC.read_text()
-    if BEGIN not in text or END not in text:
-        raise SystemExit(f"{DOC} has no {BEGIN} ... {END} block")
-    head, rest = text.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    DOC.write_text(head + BEGIN + "\n" + t + END + tail)
+    write_between(DOC, "tables", t)
     print(f"wrote the tables into {DOC}")
 
 
