@@ -14,9 +14,9 @@ The records are made once, before any configuration runs, so every
 configuration fits the same data. The cases:
 
 - `identify_mNN`: the recovery set's start-stop record NN (lss rig), its first
-  1.5 s, LW, the ten design variables free, the recovery table's pipeline
-  (identification.pipeline.identify_grown: complex on the first window, likelihood,
-  tare, start auto, one restart, shrinking, refinement, intervals);
+  1.5 s, LW, the ten design variables free, the front door with its defaults
+  (`identify_records`, as `lss identify REC --model LW` runs it, the window
+  1.5 s);
 - `pointwise_release`: for comparison, the paper's pointwise objective (not
   the default) on the release transient's first 0.6 s, four CoRs free,
   Complex-RF and Levenberg-Marquardt with intervals;
@@ -78,7 +78,6 @@ CASES = {
                       extra=dict(fit_evals=20, base_refine_evals=60, test_max=4)),
 }
 LOOP_BUDGET = dict(base_evals=80, max_evals=100, refine_evals=40)
-GROWN = dict(max_evals=300, refine_evals=400, uncertainty=True, shrink=True, start="auto", restarts=1)
 
 
 def code_stamp() -> str:
@@ -86,7 +85,7 @@ def code_stamp() -> str:
     h = hash_sources(hashlib.sha256())
     for fn in (make_records, run_identify, run_pointwise, run_loop):
         h.update(inspect.getsource(fn).encode())
-    h.update(repr((CONFIGS, CASES, LOOP_BUDGET, GROWN, WINDOW)).encode())
+    h.update(repr((CONFIGS, CASES, LOOP_BUDGET, front_door_settings().to_dict(), WINDOW)).encode())
     return h.hexdigest()[:12]
 
 
@@ -112,17 +111,22 @@ def path_used(path: int) -> int:
         return int(s.get("solver.vector_path_used"))
 
 
+def front_door_settings():
+    from identification import Settings
+    return Settings(window=WINDOW)
+
+
 def run_identify(case: dict, path: int) -> dict:
-    from identification.pipeline.identify_grown import identify_grown
-    from identification.objective.problem import from_measurement
+    from identification import build_problem, identify_records
     from lss_fmu.measurement import load_measurement
     from lss_fmu.rig import load_truth, true_design_values
     meas = load_measurement(record_dir(case["number"]))
-    p = from_measurement(meas, "LW", window=WINDOW, tare=True, objective="likelihood",
-                         fixed={"solver.vector_path": path})
+    settings = front_door_settings()
+    p = build_problem([meas], "LW", settings)
+    p = dataclasses.replace(p, fixed={**p.fixed, "solver.vector_path": path})
     truth = true_design_values(load_truth(meas))
     f_truth = float(p(np.array([truth[n] for n in p.free])))
-    res = identify_grown(p, seed=0, **GROWN)
+    res = identify_records([meas], "LW", settings, seed=0, problem=p)
     iv = {i.name: i for i in (res.intervals or [])}
     return {"f": float(res.f), "f_truth": f_truth, "nfev": int(res.nfev),
             "x": {n: float(v) for n, v in zip(p.free, res.x)},

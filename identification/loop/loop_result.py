@@ -171,5 +171,6 @@ class CloseLoopResult:
     def to_dict(self) -> dict:
         return {"measurement": self.problem.name, "model": self.problem.model, "layout": self.problem.layout,
                 "protocol": self.problem.protocol.name, "found": self.found, "verdict": self.verdict,
-                "outcome": self.outcome, "seconds": self.seconds, "base_grown": self.grown,
+                "outcome": self.outcome, "seconds": self.seconds,
+                "x_base": dict(zip(self.problem.free, map(float, self.x_base))), "base_grown": self.grown,
                 "rounds": [r.to_dict() for r in self.rounds]}

@@ -68,8 +68,10 @@ _RULES = {
 }
 
 
-def _typed(key: str, value: Any, where: str):
-    kind, ok, must = _RULES[key]
+def typed(rules: Mapping[str, tuple], key: str, value: Any, where: str):
+    """`value` of `key` checked against `rules` (key -> (type, condition, what
+    it must be)); a SettingsError naming `where`, the key and the value."""
+    kind, ok, must = rules[key]
     if kind is bool:
         good = isinstance(value, bool)
     elif kind is int:
@@ -102,7 +104,7 @@ def settings_from(mapping: Mapping[str, Any], where: str = "settings",
             except ValueError as exc:
                 raise SettingsError(f"{where}: free: {exc}") from None
         else:
-            values[key] = _typed(key, value, where)
+            values[key] = typed(_RULES, key, value, where)
     return dataclasses.replace(base, **values)
 
 
@@ -116,16 +118,26 @@ def read_toml(path: Path, error: type = ValueError) -> dict:
         raise error(f"{path}: not TOML: {exc}") from None
 
 
+TABLES = ("identify", "close_loop")   # a settings file's tables: this one's, identification.loop.settings'
+
+
+def table_of(path: Union[str, Path], name: str) -> dict:
+    """Table [name] of a settings file (empty if absent); a file with a table
+    other than TABLES, or [name] not a table, is refused naming the file."""
+    path = Path(path)
+    data = read_toml(path, SettingsError)
+    extra = sorted(set(data) - set(TABLES))
+    if extra:
+        raise SettingsError(f"{path}: unknown table [{extra[0]}]: the settings live in "
+                            + " and ".join(f"[{t}]" for t in TABLES))
+    table = data.get(name, {})
+    if not isinstance(table, dict):
+        raise SettingsError(f"{path}: {name} must be a table")
+    return table
+
+
 def load_settings(path: Union[str, Path, None]) -> Settings:
     """The settings of a TOML file's [identify] table (None: the defaults)."""
     if path is None:
         return Settings()
-    path = Path(path)
-    data = read_toml(path, SettingsError)
-    extra = sorted(set(data) - {"identify"})
-    if extra:
-        raise SettingsError(f"{path}: unknown table [{extra[0]}]: the settings live in [identify]")
-    table = data.get("identify", {})
-    if not isinstance(table, dict):
-        raise SettingsError(f"{path}: identify must be a table")
-    return settings_from(table, where=f"{path} [identify]")
+    return settings_from(table_of(path, "identify"), where=f"{path} [identify]")
