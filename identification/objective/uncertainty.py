@@ -9,10 +9,12 @@ samples are correlated (lag-1 coefficient rho_j) holds fewer independent
 samples, n (1 - rho_j) / (1 + rho_j). The covariance of the estimate is
 (J' W J)^-1 with W = diag(1 / sigma_j^2) reduced by that factor, the
 interval the estimate +- 1.96 standard deviations (about 95 %) clipped to
-the bounds. A variable is *not identifiable* when that interval is wider
-than IDENTIFIABLE_WIDTH of its bound range: the record leaves it anywhere
-in a large part of what it may be (the profile of such a variable is flat
-within the noise). Nor is a variable in which the simulation is not smooth:
+the bounds. A variable is *not identifiable* when that interval, before
+the bounds clip it, is wider than IDENTIFIABLE_WIDTH of its bound range:
+the record leaves it anywhere in a large part of what it may be (the
+profile of such a variable is flat within the noise). The width is the
+record's, not the bounds': a value at a bound with a wide interval is not
+claimed because half of that interval lies beyond the bound. Nor is a variable in which the simulation is not smooth:
 where the forward and the backward difference disagree (ROUGH of their
 mean or more, in the objective's metric) the record is chaotic in that
 variable (steady running, docs/identification.md), the linearisation means
@@ -116,7 +118,7 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
         a, b = max(lo[k], x[k] - Z95 * sd[k]), min(hi[k], x[k] + Z95 * sd[k])
         smooth = bool(rough[k] < ROUGH)
         ok = bool(smooth and at_noise is not False and np.isfinite(sd[k])
-                  and (b - a) <= IDENTIFIABLE_WIDTH * (hi[k] - lo[k]))
+                  and 2.0 * Z95 * sd[k] <= IDENTIFIABLE_WIDTH * (hi[k] - lo[k]))
         out.append(Interval(name, float(x[k]), float(sd[k]), float(a), float(b), ok, smooth=smooth,
                             at_noise=at_noise))
     return out
