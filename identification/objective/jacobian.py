@@ -30,7 +30,7 @@ MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound
 
 def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
              rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
-             steps: Optional[np.ndarray] = None) -> tuple:
+             steps: Optional[np.ndarray] = None, guess: Optional[np.ndarray] = None) -> tuple:
     """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
     each column): central differences inside the bounds, one-sided at a bound;
     the roughness is |forward - backward| / |their mean| in the metric
@@ -42,7 +42,9 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     lengthened until the simulation moves by about RESPONSE in the metric of
     `weights` (a few noise levels: far above the solver's error, far below the
     nonlinearity of a variable the record pins to a thousandth of its range,
-    such as the pretension).
+    such as the pretension). `guess`: first steps to scale from instead of
+    `rel_step` of the range (the steps of a neighbouring window: most need
+    no rescaling there).
 
     The simulations run in rounds (each column's first step, its rescaled
     steps, its second step), side by side on the problem's pool when it has
@@ -75,7 +77,8 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
         return out
 
     span = hi - lo
-    h = np.array([float(steps[k]) if steps is not None and steps[k] > 0 else rel_step * span[k] for k in range(n)])
+    first = steps if steps is not None else guess
+    h = np.array([float(first[k]) if first is not None and first[k] > 0 else rel_step * span[k] for k in range(n)])
     sgn = np.where(x + h <= hi, 1.0, -1.0)
     y1 = run({k: at(k, sgn[k] * h[k]) for k in range(n)})
     if steps is None:

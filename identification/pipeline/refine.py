@@ -33,6 +33,7 @@ class Refined:
     nfev: int
     iterations: int
     sim: Optional[np.ndarray] = None   # the simulation at x (None if the start point failed)
+    steps: Optional[np.ndarray] = None  # central: the difference steps the Jacobians used
 
 
 def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> tuple:
@@ -46,7 +47,8 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
 
 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
-           f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None) -> Refined:
+           f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None,
+           steps: Optional[np.ndarray] = None, broyden: bool = False) -> Refined:
     """Levenberg-Marquardt from x within the problem's bounds, at most
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
@@ -55,7 +57,13 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     bottom of a smooth bowl, where one-sided differences stall at about half
     their step). `channel_weights`: per channel, the metric minimised instead
     of the objective's 1 / (n span_j^2) (identification.loop.evidence: 1 / sigma_j^2,
-    the likelihood's); f is then that weighted sum of squares."""
+    the likelihood's); f is then that weighted sum of squares. `steps`:
+    central steps to scale from (Refined.steps of a neighbouring problem).
+    `broyden`: after an accepted step the Jacobian is updated by Broyden's
+    rank-one formula (in the variables scaled to their ranges) instead of
+    differenced again; it is differenced again only where a step from the
+    updated one gains less than `f_rtol`, and the refinement stops where a
+    step from a differenced one does."""
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
@@ -67,17 +75,20 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     f = f_start = float(np.sum(r ** 2))
     nfev, it, lam = 1, 0, 1e-3
     per_jacobian = len(x) * (2 if central else 1)
-    steps = None   # central: scaled to each variable's sensitivity at the start, kept after
-    while nfev + per_jacobian + 1 <= max_evals:
-        if central:
-            w = 1.0 / noise_level(problem.samples - sim) ** 2
-            J, used, _ = jacobian(problem, x, sim, rel_step, w, steps)
-            nfev += per_jacobian + (len(x) if steps is None else 0)
-            steps = used
-            raw = [J[:, :, k] for k in range(len(x)) if used[k] > 0]
-        else:
-            raw = one_sided_jacobian(problem, x, sim, rel_step=rel_step)
-            nfev += per_jacobian
+    guess, steps = steps, None   # central: scaled to each variable's sensitivity at the start, kept after
+    span = np.where(hi > lo, hi - lo, 1.0)
+    raw, fresh = None, True   # the Jacobian's columns; whether they were differenced at x
+    while nfev + (0 if not fresh else per_jacobian) + 1 <= max_evals:
+        if fresh:
+            if central:
+                w = 1.0 / noise_level(problem.samples - sim) ** 2
+                J, used, _ = jacobian(problem, x, sim, rel_step, w, steps, guess=guess)
+                nfev += per_jacobian + (len(x) if steps is None else 0)
+                steps = used
+                raw = [J[:, :, k] for k in range(len(x)) if used[k] > 0]
+            else:
+                raw = one_sided_jacobian(problem, x, sim, rel_step=rel_step)
+                nfev += per_jacobian
         if len(raw) != len(x):
             break
         A = np.stack([(demean_columns(g, demean) * sw).ravel() for g in raw], axis=1)
@@ -102,6 +113,8 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 f_n = float("inf")
             if f_n < f:
                 gain = (f - f_n) / f
+                if broyden:
+                    raw = _broyden(raw, (xn - x) / span, sim_n - sim, span)
                 x, sim, r, demean, f = xn, sim_n, r_n, dm_n, f_n
                 lam = max(lam / 10.0, 1e-7)
                 better = gain >= f_rtol
@@ -110,8 +123,24 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
             if lam > 1e4:
                 break
         if not better:
+            if broyden == "refresh" and not fresh:   # the updated Jacobian may be what stalls: difference it
+                fresh, lam = True, 1e-3
+                continue
             break
-    return Refined(x, f, f_start, nfev, it, sim)
+        fresh = not broyden
+    return Refined(x, f, f_start, nfev, it, sim, steps)
+
+
+def _broyden(raw: list, z: np.ndarray, dy: np.ndarray, span: np.ndarray) -> list:
+    """Columns of the Jacobian after Broyden's rank-one update for the step z
+    (scaled to the ranges) that changed the simulation by dy: the least change
+    (in the scaled variables) that makes J z = dy."""
+    zz = float(z @ z)
+    if not zz > 0:
+        return raw
+    G = np.stack(raw, axis=-1) * span          # d sim / d z
+    G = G + np.multiply.outer(dy - G @ z, z) / zz
+    return [G[..., k] / span[k] for k in range(len(raw))]
 
 
 def _bounded_step(AtA, Atb, lam, scale, x, lo, hi) -> np.ndarray:
