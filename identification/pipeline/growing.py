@@ -43,11 +43,13 @@ log = logging.getLogger(__name__)
 
 FIRST = 0.3        # s, the first window: smooth on every clean release transient tried
 GROWTH = 1.45      # each window this much longer than the one before (0.3, 0.44, 0.63, 0.91, ... s)
-STEP_ITERATIONS = 3  # Levenberg-Marquardt iterations (central Jacobians) a window at most
+STEP_ITERATIONS = 3  # a window's budget: this many Levenberg-Marquardt iterations with central Jacobians
 UNSEEN_STEP = 0.05   # share of a variable's range moved to see whether the first window sees it ...
 UNSEEN_DS = 1e-6     # ... S changing by less than this (a chi^2 unit is 1): not seen at all
-CARRY_STEPS = False  # each window's Jacobian steps scaled from the window before's
-BROYDEN = False      # Levenberg-Marquardt in a window updates its Jacobian (refine's broyden)
+CARRY_STEPS = False  # each window's Jacobian steps scaled from the window before's (fewer simulations) ...
+BROYDEN = False      # ... and the window's Jacobian updated after each step, not differenced again (refine's
+                     # broyden): 0.76-0.82 of the CPU on five recovery measurements, but not yet the default:
+                     # docs/benchmarks.md, "Levers measured, not taken"
 RETRY_Z = 3.0        # a retry is asked where the first window's S is this many sd of chi^2 above its mean
                      # (no margin): stricter than the at-noise test of the intervals, as the retry only
                      # costs simulations and is taken only where it fits the first window better (on one
@@ -162,7 +164,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
         r = refine(q, x, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP,
                    steps=carried if CARRY_STEPS else None, broyden=BROYDEN)
-        carried = r.steps if r.steps is not None else carried
+        carried = getattr(r, "steps", None) if getattr(r, "steps", None) is not None else carried
         nfev += r.nfev
         # refine's f is S in the same metric at its point: no simulation more
         xr, fr = (np.asarray(r.x, float), float(r.f)) if np.isfinite(r.f) else (x, float("inf"))
