@@ -101,3 +101,24 @@ def test_the_front_door_has_few_options():
     options = [ln.split()[0] for ln in out.splitlines() if ln.strip().startswith("--")]
     assert len(options) <= 8, options
     assert "--settings" in options and "--model" in options
+
+
+def test_one_file_holds_the_identification_and_the_loop_settings(tmp_path):
+    """[identify] and [close_loop] in one file: each reader takes its table, the
+    loop's defaults are the loop's own constants and reach close_loop's keywords."""
+    from identification.loop import candidates, close_loop
+    from identification.loop.settings import LoopSettings, load_loop_settings
+    from identification.pipeline import base_polish
+    path = tmp_path / "both.toml"
+    path.write_text("[identify]\nmax_evals = 40\n[close_loop]\ncandidates = 2\nrefine_evals = 0\n")
+    assert load_settings(path) == Settings(max_evals=40)
+    loop = load_loop_settings(path)
+    assert loop == LoopSettings(candidates=2, refine_evals=0)
+    assert load_loop_settings(None) == LoopSettings(
+        fit_evals=candidates.RESCORE_EVALS, refine_evals=candidates.REFINE_EVALS,
+        base_refine_evals=base_polish.BASE_REFINE_EVALS, profile_points=base_polish.PROFILE_POINTS,
+        candidates=close_loop.TEST_MAX)
+    kw = loop.budget()
+    assert kw["test_max"] == 2 and kw["refine_evals"] == 0 and kw["polish_evals"] == kw["max_evals"] == 200
+    import inspect
+    assert set(kw) <= set(inspect.signature(close_loop.close_loop).parameters)
