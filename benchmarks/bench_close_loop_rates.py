@@ -49,6 +49,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import numpy as np  # noqa: E402
+from scipy.stats import binomtest  # noqa: E402
 
 from bench_common import hash_sources  # noqa: E402
 
@@ -314,7 +315,19 @@ def load_results(folder: Path = RESULTS) -> list:
     return [json.loads(p.read_text()) for p in sorted(Path(folder).glob("*.json"))]
 
 
+def rate_interval(k: int, n: int, level: float = 0.95) -> list:
+    """The exact (Clopper-Pearson) `level` interval of a rate seen k times in n records; [0, 1] for none."""
+    if n <= 0:
+        return [0.0, 1.0]
+    ci = binomtest(int(k), int(n)).proportion_ci(confidence_level=level, method="exact")
+    return [float(ci.low), float(ci.high)]
+
+
 def summarise(results: list) -> dict:
+    """Rates from the stored rows: per family and amplitude the records, hits, wrong effects and the
+    exact 95 % interval of the hit rate; the smallest amplitude found in >= 90 % of >= 5 records with
+    the lower end of its interval (what the records guarantee); the clean records' false alarms with
+    the upper end of theirs."""
     clean = [r for r in results if r["kind"] == "clean" and "error" not in r]
     false = [r["id"] for r in clean if r["found"]]
     det = {}
@@ -327,12 +340,14 @@ def summarise(results: list) -> dict:
             hit = [r for r in rs if target in r["found"][:1]]
             wrong = [r for r in rs if r["found"] and target not in r["found"][:1]]
             rows.append({"amplitude": a, "records": len(rs), "found": len(hit), "wrong_effect": len(wrong),
-                         "rate": len(hit) / len(rs) if rs else None,
+                         "rate": len(hit) / len(rs) if rs else None, "ci95": rate_interval(len(hit), len(rs)),
                          "outcomes": {o: sum(r["outcome"] == o for r in rs) for o in
                                       ("confirmed", "undecided", "not in the catalogue", "nothing significant")}})
         ok = [row["amplitude"] for row in rows if row["rate"] is not None and row["records"] >= 5
               and row["rate"] >= 0.9]
-        det[fam] = {"unit": unit, "what": what, "rows": rows, "smallest_90": min(ok) if ok else None}
+        at = next((row for row in rows if ok and row["amplitude"] == min(ok)), None)
+        det[fam] = {"unit": unit, "what": what, "rows": rows, "smallest_90": min(ok) if ok else None,
+                    "smallest_90_lower": at["ci95"][0] if at else None}
     ooc = {}
     for name in OOC:
         rs = [r for r in results if r["kind"] == "ooc" and r["artefact"] == name and "error" not in r]
@@ -342,6 +357,7 @@ def summarise(results: list) -> dict:
     errors = [r["id"] for r in results if "error" in r]
     cpu = [r["cpu_s"] for r in results if "cpu_s" in r]
     return {"clean": {"records": len(clean), "false_confirmations": false,
+                      "false_rate_upper": rate_interval(len(false), len(clean))[1],
                       "outcomes": {o: sum(r["outcome"] == o for r in clean) for o in
                                    ("confirmed", "undecided", "not in the catalogue", "nothing significant")},
                       "by_source": {s: sum(r["source"] == s for r in clean) for s in ("synthetic", "rig")},
@@ -393,15 +409,23 @@ def figure(summary: dict, path: Path) -> None:
 
 def table(summary: dict) -> str:
     n = max(len(d["rows"]) for d in summary["detection"].values())
-    lines = ["| effect | unit | " + " | ".join(f"a{i}" for i in range(n)) + " | smallest found in >= 90 % |",
-             "|---|---|" + "---|" * (n + 1)]
+    lines = ["| effect | unit | " + " | ".join(f"a{i}" for i in range(n))
+             + " | smallest found in >= 90 % | its rate, 95 % interval (exact) |",
+             "|---|---|" + "---|" * (n + 2)]
     for fam, d in summary["detection"].items():
         cells = [f"{row['amplitude']:g}: {row['found']}/{row['records']}"
                  + (f" ({row['wrong_effect']} wrong)" if row["wrong_effect"] else "") if row["records"]
                  else f"{row['amplitude']:g}: -" for row in d["rows"]]
         cells += [""] * (n - len(cells))   # a family with fewer amplitudes
         best = "-" if d["smallest_90"] is None else f"{d['smallest_90']:g}" + ("" if d["unit"] == "1" else f" {d['unit']}")
-        lines.append(f"| {fam} | {d['unit']} | " + " | ".join(cells) + f" | {best} |")
+        ci = next((row["ci95"] for row in d["rows"] if row["amplitude"] == d["smallest_90"]), None) \
+            if d["smallest_90"] is not None else None
+        band = "-" if ci is None else f"{100 * ci[0]:.0f}-{100 * ci[1]:.0f} %"
+        lines.append(f"| {fam} | {d['unit']} | " + " | ".join(cells) + f" | {best} | {band} |")
+    c = summary["clean"]
+    lines.append("")
+    lines.append(f"Clean records: {len(c['false_confirmations'])} of {c['records']} with an effect confirmed; "
+                 f"the false-alarm rate is below {100 * c['false_rate_upper']:.0f} % (95 %, exact).")
     return "\n".join(lines)
 
 

@@ -117,3 +117,23 @@ def test_summarise_counts_hits_wrong_effects_and_the_90_percent_amplitude():
     assert s["out_of_catalogue"]["crosstalk"] == {"records": 1, "not_in_catalogue": 1, "confirmed": 0, "nothing": 0}
     assert s["detection"]["track_bump"]["smallest_90"] is None       # no record: no threshold
     assert s["cpu_s"]["total"] == pytest.approx(sum(r["cpu_s"] for r in rows))
+
+
+def test_rates_carry_their_exact_interval():
+    """Each rate with its exact (Clopper-Pearson) 95 % interval: 5 of 5 bounds the rate only above 48 %,
+    20 of 20 above 83 %; the threshold's lower end and the clean records' false-alarm bound are reported."""
+    assert bench.rate_interval(5, 5)[0] == pytest.approx(0.4782, abs=1e-4)
+    assert bench.rate_interval(20, 20)[0] == pytest.approx(0.8316, abs=1e-4)
+    lo, hi = bench.rate_interval(0, 40)
+    assert lo == 0.0 and hi == pytest.approx(0.0881, abs=1e-4)
+    assert bench.rate_interval(0, 0) == [0.0, 1.0]
+    rows = [_effect("mass", 1, ["mass"], k=k) for k in range(20)]
+    rows += [{"id": f"c{k}", "kind": "clean", "source": "synthetic", "found": [], "outcome": "nothing significant",
+              "cpu_s": 1.0} for k in range(40)]
+    s = bench.summarise(rows)
+    mass = s["detection"]["mass"]
+    assert mass["smallest_90"] == bench.FAMILIES["mass"][1][1]
+    assert mass["smallest_90_lower"] == pytest.approx(0.8316, abs=1e-4)
+    assert s["clean"]["false_rate_upper"] == pytest.approx(0.0881, abs=1e-4)
+    text = bench.table(s)
+    assert "83-100 %" in text and "below 9 %" in text
