@@ -14,11 +14,12 @@ the bounds clip it, is wider than IDENTIFIABLE_WIDTH of its bound range:
 the record leaves it anywhere in a large part of what it may be (the
 profile of such a variable is flat within the noise). The width is the
 record's, not the bounds': a value at a bound with a wide interval is not
-claimed because half of that interval lies beyond the bound. Nor is a variable in which the simulation is not smooth:
-where the forward and the backward difference disagree (ROUGH of their
-mean or more, in the objective's metric) the record is chaotic in that
-variable (steady running, docs/identification.md), the linearisation means
-nothing, and no interval is claimed.
+claimed because half of that interval lies beyond the bound. Nor is a
+variable in which the simulation is not smooth: where the forward and the
+backward difference disagree (ROUGH of their mean or more, in the
+objective's metric) the record is chaotic in that variable (steady
+running, docs/identification.md), the linearisation means nothing, and no
+interval is claimed.
 """
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Optional
+from typing import Optional, Union
 
 import numpy as np
 
@@ -48,7 +48,7 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
            f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None,
-           steps: Optional[np.ndarray] = None, broyden: bool = False) -> Refined:
+           steps: Optional[np.ndarray] = None, broyden: Union[bool, str] = False) -> Refined:
     """Levenberg-Marquardt from x within the problem's bounds, at most
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
@@ -61,9 +61,10 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     central steps to scale from (Refined.steps of a neighbouring problem).
     `broyden`: after an accepted step the Jacobian is updated by Broyden's
     rank-one formula (in the variables scaled to their ranges) instead of
-    differenced again; it is differenced again only where a step from the
-    updated one gains less than `f_rtol`, and the refinement stops where a
-    step from a differenced one does."""
+    differenced again, and the refinement stops where a step gains less than
+    `f_rtol`; "refresh": such a step from an updated Jacobian has it
+    differenced again first, and the refinement stops only where a step from
+    a differenced one gains too little."""
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
