@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from identification.pipeline.stats import load_results, model_tests
+from identification.pipeline.stats import load_results, model_tests, paired_tests
 from lss_fmu.atomic import write_atomic, write_json_atomic
 from lss_fmu.design import COR_BOUNDS
 
@@ -76,6 +76,27 @@ def _cor_table(g: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def _paired_text(paired: dict) -> list:
+    """The paired tests as the report's prose and table (stats.paired_tests)."""
+    if "pairs" not in paired:
+        return [f"No paired test: {paired.get('note', 'not enough results')}."]
+    n, lines = paired["n"], []
+    best = ", ".join(f"{m} on {k}" for m, k in sorted(paired["best"].items(), key=lambda kv: -kv[1]))
+    lines.append(f"Each of the {n} measurements identified under every model is a block: the lowest f is reached by "
+                 f"{best}." + (f" Left out (not identified under every model): {', '.join(paired['left_out'])}."
+                               if paired["left_out"] else ""))
+    if "friedman_p" in paired:
+        verdict = "the models' ranks differ" if paired["friedman_p"] < 0.05 else "no model ranks consistently better"
+        lines.append(f"Friedman's test over the models: chi2 = {paired['friedman_chi2']:.3g}, "
+                     f"p = {paired['friedman_p']:.3g}: at the 5 % level {verdict}.")
+    lines += ["", "Per pair, the median of f_a / f_b over the measurements and Wilcoxon's signed-rank test on log f "
+              "(p adjusted by Holm over the pairs):", "",
+              "| a | b | median f_a / f_b | p | p (Holm) |", "|---|---|---|---|---|"]
+    lines += [f"| {q['a']} | {q['b']} | {q['median_ratio']:.3g} | {q['p']:.3g} | {q['p_holm']:.3g} |"
+              for q in paired["pairs"]]
+    return lines
+
+
 def write_report(campaign: Path) -> Path:
     campaign = Path(campaign)
     df = load_results(campaign)
@@ -95,6 +116,8 @@ def write_report(campaign: Path) -> Path:
               + ("No model is statistically better at the 5 % level."
                  if tests["anova_p"] >= 0.05 and tests["kruskal_p"] >= 0.05
                  else "At the 5 % level the models differ."), ""]
+    paired = paired_tests(df)
+    lines += ["## Paired over measurements", "", *_paired_text(paired), ""]
     for model, g in df.groupby("model"):
         lines += [f"## Coefficients of restitution, model {model}", "",
                   "Each CoR with its 95 % interval (identification.objective.uncertainty); *n.i.*: the record does not "
@@ -103,5 +126,5 @@ def write_report(campaign: Path) -> Path:
     lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]
     lines += [f"![{f}]({f})" for f in figs[1:]] + [""]
     write_atomic(out / "report.md", "\n".join(lines))
-    write_json_atomic(out / "statistics.json", {"tests": tests, "summary": summ.reset_index().to_dict("records")})
+    write_json_atomic(out / "statistics.json", {"tests": tests, "paired": paired, "summary": summ.reset_index().to_dict("records")})
     return out / "report.md"

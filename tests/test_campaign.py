@@ -68,6 +68,9 @@ def test_campaign_results_and_report(reference):
     assert "One-way ANOVA" in text and "Kruskal-Wallis" in text
     stats = json.loads((out / "report" / "statistics.json").read_text())
     assert 0.0 <= stats["tests"]["anova_p"] <= 1.0
+    assert "Paired over measurements" in text
+    assert stats["paired"]["n"] == 2 and sum(stats["paired"]["best"].values()) == 2
+    assert [(q["a"], q["b"]) for q in stats["paired"]["pairs"]] == [("HW", "LW")]
     for fig in ("objectives.png", "cor_e_SW.png", "cor_e_RW.png"):
         assert (out / "report" / fig).stat().st_size > 1000
 
