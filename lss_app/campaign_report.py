@@ -1,8 +1,11 @@
 """The campaign report (the paper's section 4) from a campaign's results: a
 Table-3 style CoR table per model, the final objectives per model with the
-tests of identification.pipeline.stats, and box plots of the CoRs per contact class
-and per wheel or joint type with the bounds drawn (Figs. 12-16). One
-Markdown report with its figures.
+tests of identification.pipeline.stats (unpaired and paired over the
+measurements), what the CoRs mean (lss_app.campaign_meaning: effective
+restitution, the box, spread against intervals, errors against answers,
+cost), and box plots of the CoRs per contact class and per wheel or joint
+type with the bounds drawn (Figs. 12-16). One Markdown report with its
+figures; the per-law CoR summary also as cors.csv.
 
     lss report CAMPAIGN_DIR
 """
@@ -14,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from identification.pipeline.stats import load_results, model_tests, paired_tests
+from lss_app.campaign_meaning import cor_rows, cor_summary, cost_summary, meaning_text, raw_results
 from lss_fmu.atomic import write_atomic, write_json_atomic
 from lss_fmu.design import COR_BOUNDS
 
@@ -123,8 +127,13 @@ def write_report(campaign: Path) -> Path:
                   "Each CoR with its 95 % interval (identification.objective.uncertainty); *n.i.*: the record does not "
                   "pin it down (interval wider than 40 % of the bounds, or the record is chaotic in it).", ""]
         lines += [_cor_table(g), ""]
+    raw = raw_results(campaign)
+    summary, cost = cor_summary(cor_rows(raw)), cost_summary(raw)
+    lines += [*meaning_text(summary, cost), ""]
     lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]
     lines += [f"![{f}]({f})" for f in figs[1:]] + [""]
     write_atomic(out / "report.md", "\n".join(lines))
-    write_json_atomic(out / "statistics.json", {"tests": tests, "paired": paired, "summary": summ.reset_index().to_dict("records")})
+    summary.to_csv(out / "cors.csv", index=False)
+    write_json_atomic(out / "statistics.json", {"tests": tests, "paired": paired, "cost": cost,
+                                                "cors": summary.to_dict("records"), "summary": summ.reset_index().to_dict("records")})
     return out / "report.md"
