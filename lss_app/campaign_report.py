@@ -12,11 +12,13 @@ figures; the per-law CoR summary also as cors.csv.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Optional, Sequence
 
 import numpy as np
 import pandas as pd
 
 from identification.pipeline.stats import load_results, model_tests, paired_tests
+from lss_app.campaign_figures import nrmsd_by_law, shown, single_figures
 from lss_app.campaign_meaning import cor_rows, cor_summary, cost_summary, meaning_text, raw_results
 from lss_fmu.atomic import write_atomic, write_json_atomic
 from lss_fmu.design import COR_BOUNDS
@@ -101,7 +103,9 @@ def _paired_text(paired: dict) -> list:
     return lines
 
 
-def write_report(campaign: Path) -> Path:
+def write_report(campaign: Path, show: Optional[Sequence[str]] = None) -> Path:
+    """The report of a campaign folder into CAMPAIGN/report/ (report.md, figures, statistics.json,
+    cors.csv); `show`: the measurements drawn whole per law (default: each law's median-f one)."""
     campaign = Path(campaign)
     df = load_results(campaign)
     out = campaign / "report"
@@ -130,6 +134,18 @@ def write_report(campaign: Path) -> Path:
     raw = raw_results(campaign)
     summary, cost = cor_summary(cor_rows(raw)), cost_summary(raw)
     lines += [*meaning_text(summary, cost), ""]
+    lines += ["## One measurement per law, whole (Fig. 8-10)", "",
+              "The measured forces (grey band: +-2 sensor sigma) against the simulations at the start and at the "
+              "optimum, as the objective compares them (tared), on the window the result is for; then the "
+              "objective of every evaluation. NRMSD per channel, start and optimum, over every measurement of a "
+              "law (Fig. 11) below.", ""]
+    for r in shown(raw, show):
+        figs_r, note = single_figures(r, out)
+        lines += [f"### {r.get('sorter', r.get('measurement'))}, {r['model']}: f {r['f']:.4g}", ""]
+        lines += [f"![{f}]({f})" for f in figs_r] + ([note] if note else []) + [""]
+    nr = nrmsd_by_law(raw, out)
+    if nr:
+        lines += [f"![NRMSD per channel]({nr})", ""]
     lines += ["## CoRs per contact class and cart type (bounds dotted)", ""]
     lines += [f"![{f}]({f})" for f in figs[1:]] + [""]
     write_atomic(out / "report.md", "\n".join(lines))

@@ -27,6 +27,8 @@ def register(sub, common) -> None:
 
     rp = sub.add_parser("report", parents=[common], help="the paper's section 4 from a campaign")
     rp.add_argument("campaign")
+    rp.add_argument("--show", default=None, metavar="NAMES",
+                    help="measurements drawn whole per law, comma-separated (default: each law's median-f one)")
     rp.set_defaults(run=run_report)
 
 
@@ -45,6 +47,7 @@ def run_campaign(args) -> int:
 
 def run_report(args) -> int:
     from .campaign_report import write_report
-    path = write_report(Path(args.campaign))
+    show = [m.strip() for m in args.show.split(",") if m.strip()] if args.show else None
+    path = write_report(Path(args.campaign), show=show)
     print(f"wrote {path}")
     return 0

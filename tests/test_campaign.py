@@ -71,7 +71,10 @@ def test_campaign_results_and_report(reference):
     assert "Paired over measurements" in text
     assert stats["paired"]["n"] == 2 and sum(stats["paired"]["best"].values()) == 2
     assert [(q["a"], q["b"]) for q in stats["paired"]["pairs"]] == [("HW", "LW")]
-    for fig in ("objectives.png", "cor_e_SW.png", "cor_e_RW.png"):
+    # Fig. 8-10 for each law's median-f measurement (simulated again from its records), Fig. 11 over all
+    shown = {r["model"]: r["sorter"] for r in results if r["f"] == min(q["f"] for q in results if q["model"] == r["model"])}
+    for fig in ("objectives.png", "cor_e_SW.png", "cor_e_RW.png", "nrmsd_by_law.png",
+                *(f"forces_{s}_{m}.png" for m, s in shown.items()), *(f"history_{s}_{m}.png" for m, s in shown.items())):
         assert (out / "report" / fig).stat().st_size > 1000
 
 
