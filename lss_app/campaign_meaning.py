@@ -29,6 +29,7 @@ from lss_fmu.design import COR_BOUNDS, CORS, SYMBOL
 
 AT_BOUND = 0.005      # a value this close to 0.2 or 0.9 is held by the box
 TARGET = 0.03         # the recovery table's tolerance on a CoR
+CARRY = 2.0           # a CoR whose spread across measurements is within this many interval half-widths carries
 
 
 class ReportError(ValueError):
@@ -167,6 +168,12 @@ def meaning_text(summary: pd.DataFrame, cost: dict) -> list[str]:
         if truth:
             cells += [_f(q["median_abs_error"]), f"{q['claimed_within']} of {q['claimed']}"]
         lines.append("| " + " | ".join(cells) + " |")
+    carry = summary[summary["spread_over_width"] <= CARRY]
+    if not summary.empty:
+        lines += ["", "CoRs that carry to another layout (spread across measurements at most "
+                  f"{CARRY:g} x one interval's half-width): "
+                  + ("; ".join(f"{m}: {', '.join(g['cor'])}" for m, g in carry.groupby("model"))
+                     if len(carry) else "none") + "."]
     if np.isfinite(cost.get("total_cpu_s", np.nan)):
         per = "; ".join(f"{m}: median {_f(c['median_cpu_s'], '.0f')} CPU-s, max {_f(c['max_cpu_s'], '.0f')}"
                         for m, c in cost["per_model"].items())

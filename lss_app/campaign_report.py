@@ -95,12 +95,30 @@ def _paired_text(paired: dict) -> list:
         verdict = "the models' ranks differ" if paired["friedman_p"] < 0.05 else "no model ranks consistently better"
         lines.append(f"Friedman's test over the models: chi2 = {paired['friedman_chi2']:.3g}, "
                      f"p = {paired['friedman_p']:.3g}: at the 5 % level {verdict}.")
+    lines.append(_verdict(paired))
     lines += ["", "Per pair, the median of f_a / f_b over the measurements and Wilcoxon's signed-rank test on log f "
               "(p adjusted by Holm over the pairs):", "",
               "| a | b | median f_a / f_b | p | p (Holm) |", "|---|---|---|---|---|"]
     lines += [f"| {q['a']} | {q['b']} | {q['median_ratio']:.3g} | {q['p']:.3g} | {q['p_holm']:.3g} |"
               for q in paired["pairs"]]
     return lines
+
+
+def _verdict(paired: dict) -> str:
+    """Which law fits best, and the test behind it: the law lowest on the most
+    measurements fits best when it is lower than every other law on the
+    measurements (median ratio below 1) with Holm-adjusted p < 0.05 each."""
+    lead = max(paired["best"], key=lambda m: paired["best"][m])
+    against = [q for q in paired["pairs"] if lead in (q["a"], q["b"])]
+    ratio = {(q["b"] if q["a"] == lead else q["a"]): (q["median_ratio"] if q["a"] == lead else 1 / q["median_ratio"],
+                                                      q["p_holm"]) for q in against}
+    if all(r < 1 and p < 0.05 for r, p in ratio.values()):
+        worst = max(p for _, p in ratio.values())
+        return (f"**{lead} fits best**: lowest f on {paired['best'][lead]} of {paired['n']} measurements, below every "
+                f"other law measurement by measurement (Holm-adjusted Wilcoxon p <= {worst:.2g}).")
+    weak = ", ".join(f"{m} (f ratio {r:.3g}, p {p:.2g})" for m, (r, p) in ratio.items() if not (r < 1 and p < 0.05))
+    return (f"**No law fits significantly better than all others**: {lead} is lowest on {paired['best'][lead]} of "
+            f"{paired['n']} measurements but not significantly below {weak} at the 5 % level.")
 
 
 def write_report(campaign: Path, show: Optional[Sequence[str]] = None) -> Path:

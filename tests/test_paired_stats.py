@@ -74,3 +74,12 @@ def test_holm_matches_its_definition():
     expect = {3: 0.02, 0: 0.03, 2: 0.06, 1: 0.06}
     assert holm(p) == pytest.approx([expect[k] for k in range(4)])
     assert holm([0.5, 0.6]).max() <= 1.0
+
+
+def test_the_reports_verdict_names_the_best_law_only_when_the_test_says_so():
+    from lss_app.campaign_report import _verdict
+    rng = np.random.default_rng(5)
+    better = paired_tests(campaign(rng, 12, {"HC": 1.0, "HW": 0.7, "LN": 1.0, "LW": 1.0}))
+    assert _verdict(better).startswith("**HW fits best**")
+    null = paired_tests(campaign(rng, 12, dict.fromkeys(MODELS, 1.0)))
+    assert _verdict(null).startswith("**No law fits significantly better")
