@@ -75,6 +75,12 @@ static int allocate(Chain *c) {
     c->m.err_rel = xcalloc(c, ny, sizeof(double), &fail);
     c->m.mass = xcalloc(c, N, sizeof(double), &fail);
     c->m.inertia = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
+    size_t nm = (size_t)(c->m.track.n_motors > 0 ? c->m.track.n_motors : 1);
+    c->m.motor_group = xcalloc(c, nm, sizeof(int), &fail);
+    c->st.F_motor = xcalloc(c, nm, sizeof(double), &fail);
+    if (!fail)  /* the motors in track order, in groups of (nearly) equal count */
+        for (int k = 0; k < c->m.track.n_motors; k++)
+            c->m.motor_group[k] = (int)((long)k * c->m.n_groups / c->m.track.n_motors);
     return fail;
 }
 
@@ -87,7 +93,7 @@ void chain_free(Chain *c) {
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
                     c->ode.k[7], c->ode.k[8], c->ode.k[9], c->ode.k[10], c->ode.k[11], c->ode.k[12],
                     c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel,
-                    c->m.mass, c->m.inertia};
+                    c->m.mass, c->m.inertia, c->m.motor_group, c->st.F_motor};
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
         if (ptrs[i]) a.free(ptrs[i]);
     track_free(&c->m.track, &a);
@@ -176,6 +182,27 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
                  m->s_start, m->track.length);
         goto fail;
     }
+    const double st_s[N_STATION] = {p->station_induction_s, p->station_chute_s};
+    const char *st_name[N_STATION] = {"station.induction.s", "station.chute.s"};
+    for (int k = 0; k < N_STATION; k++) {
+        m->station_s[k] = st_s[k];
+        if (!(st_s[k] < m->track.length)) {
+            snprintf(err, errlen, "%s = %.17g is invalid: must lie in [0, %.17g), the track length", st_name[k],
+                     st_s[k], m->track.length);
+            goto fail;
+        }
+    }
+    m->drive_mode = p->drive_mode;
+    m->n_groups = p->drive_n_groups;
+    if (m->drive_mode == DRIVE_EXTERNAL && m->track.n_motors == 0) {
+        snprintf(err, errlen, "drive.mode = 1 (external thrust) needs motors: layout \"%s\" has none", m->layout_name);
+        goto fail;
+    }
+    if (m->track.n_motors > 0 && m->n_groups > m->track.n_motors) {
+        snprintf(err, errlen, "drive.n_groups = %d is invalid: layout \"%s\" has %d motors", m->n_groups,
+                 m->layout_name, m->track.n_motors);
+        goto fail;
+    }
     m->method = p->solver_method;
     cart_geometry_init(&m->g, &m->type, m->track.length / m->n_carts, p->track_guide_gap, p->cart_mass_factor);
     if (allocate(c)) {
@@ -226,6 +253,21 @@ void chain_set_inputs(Chain *c, const LSSParams *p) {
             m->law[k].chi = chi;
             changed = 1;
         }
+    if (m->drive_mode == DRIVE_EXTERNAL) {
+        /* each group's thrust per motor, saturated at the motor's rating (the FMI layer logs it) */
+        const double Fg[DRIVE_GROUPS] = {p->drive_group1_F, p->drive_group2_F, p->drive_group3_F, p->drive_group4_F,
+                                         p->drive_group5_F, p->drive_group6_F, p->drive_group7_F, p->drive_group8_F};
+        int moved = 0;
+        for (int g = 0; g < DRIVE_GROUPS; g++) {
+            double F = Fg[g] > m->F_max ? m->F_max : (Fg[g] < -m->F_max ? -m->F_max : Fg[g]);
+            moved |= F != c->st.F_group[g];
+            c->st.F_group[g] = F;
+        }
+        if (moved) {
+            for (int k = 0; k < m->track.n_motors; k++) c->st.F_motor[k] = c->st.F_group[m->motor_group[k]];
+            changed = 1;
+        }
+    }
     if (changed) c->st.ode.fsal_valid = c->scratch_at_state = 0;
     m->mu_roll = p->wheel_mu_roll;
     c->st.v_ref = p->drive_v_ref;
@@ -250,7 +292,7 @@ void chain_start_memory(Chain *c) {
 
 /* Snapshot layout: header, then y, s_hint, v_onset, delta_prev, ddelta_prev
  * and the FSAL derivative, so that a restored run replays bit for bit. */
-#define SNAP_HEADER 12
+#define SNAP_HEADER 20
 
 size_t chain_state_size(const Chain *c) {
     return (size_t)SNAP_HEADER + 2 * (size_t)c->m.n_y + (size_t)c->m.n_carts * (1 + 3 * N_SLOT);
@@ -263,6 +305,7 @@ void chain_state_save(const Chain *c, double *buf) {
     double hdr[SNAP_HEADER] = {(double)c->m.n_y, o->t, o->h, o->err_prev, st->v_ref, st->Kp, st->Ki,
                                (double)o->n_steps, (double)o->n_rejected, (double)o->n_rhs, o->h_last,
                                (double)o->fsal_valid};
+    for (int g = 0; g < DRIVE_GROUPS; g++) hdr[12 + g] = st->F_group[g];
     memcpy(buf, hdr, sizeof hdr);
     double *p = buf + SNAP_HEADER;
     memcpy(p, st->y, sizeof(double) * (size_t)c->m.n_y); p += c->m.n_y;
@@ -305,6 +348,15 @@ int chain_state_check(const double *buf, size_t n, const LSSParams *built, doubl
     if (buf[4] != built->drive_v_ref || buf[5] != built->drive_Kp || buf[6] != built->drive_Ki)
         BAD("inputs in the chain snapshot (v_ref %.17g, Kp %.17g, Ki %.17g) differ from the state's parameters",
             buf[4], buf[5], buf[6]);
+    const double Fg[DRIVE_GROUPS] = {built->drive_group1_F, built->drive_group2_F, built->drive_group3_F,
+                                     built->drive_group4_F, built->drive_group5_F, built->drive_group6_F,
+                                     built->drive_group7_F, built->drive_group8_F};
+    for (int g = 0; g < DRIVE_GROUPS; g++) {
+        double Fm = built->drive_F_max, F = Fg[g] > Fm ? Fm : (Fg[g] < -Fm ? -Fm : Fg[g]);
+        if (buf[12 + g] != (built->drive_mode == DRIVE_EXTERNAL ? F : 0.0))
+            BAD("external thrust of group %d in the chain snapshot (%.17g N) differs from the state's parameters",
+                g + 1, buf[12 + g]);
+    }
     if (!is_count(buf[7]) || !is_count(buf[8]) || !is_count(buf[9]))
         BAD("solver counters %.17g, %.17g, %.17g are not whole numbers in [0, 2^53]", buf[7], buf[8], buf[9]);
     if (buf[11] != 0 && buf[11] != 1) BAD("solver flag %.17g is neither 0 nor 1", buf[11]);
@@ -341,6 +393,8 @@ void chain_state_load(Chain *c, const double *buf) {
     DopriState *o = &st->ode;
     o->t = buf[1]; o->h = buf[2]; o->err_prev = buf[3];
     st->v_ref = buf[4]; st->Kp = buf[5]; st->Ki = buf[6];
+    for (int g = 0; g < DRIVE_GROUPS; g++) st->F_group[g] = buf[12 + g];
+    for (int k = 0; k < c->m.track.n_motors; k++) st->F_motor[k] = st->F_group[c->m.motor_group[k]];
     o->n_steps = (long)buf[7]; o->n_rejected = (long)buf[8]; o->n_rhs = (long)buf[9]; o->h_last = buf[10];
     const double *p = buf + SNAP_HEADER;
     memcpy(st->y, p, sizeof(double) * (size_t)c->m.n_y); p += c->m.n_y;

@@ -32,6 +32,10 @@
 #define G_ROLL_R 5  /* the same, right */
 #define N_GLOBAL 6
 
+#define DRIVE_GROUPS 8   /* motor groups a plant model can drive: drive.group1.F .. (lss_fmu.variables.N_GROUPS) */
+enum { DRIVE_INTERNAL = 0, DRIVE_EXTERNAL = 1 };
+enum { STATION_INDUCTION = 0, STATION_CHUTE, N_STATION };
+
 enum { CC_JA = 0, CC_JR, CC_SW, CC_RW, CC_N };          /* contact classes */
 enum { W_SL = 0, W_SR, W_DL, W_DR, N_WHEEL };          /* wheels of one cart */
 /* Contact slots per cart: 0 joint axial, 1 joint radial (of its front joint),
@@ -83,6 +87,10 @@ typedef struct ChainModel {
     double *inertia;                  /* [3N] its principal moments, kg m^2 */
     double *err_scale;                /* per state: absolute scale of the error norm */
     double *err_rel;                  /* per state: 1 if the error is also relative to |y| */
+    int drive_mode;                   /* DRIVE_INTERNAL (the PI) or DRIVE_EXTERNAL (thrust inputs per group) */
+    int n_groups;                     /* motor groups (drive.n_groups) */
+    int *motor_group;                 /* [n_motors] the group of each motor, in track order */
+    double station_s[N_STATION];      /* arc positions of the stations (induction, chute) */
 } ChainModel;
 
 /* Per-cart quantities of the latest right-hand-side evaluation, kept
@@ -123,6 +131,8 @@ typedef struct ChainState {
     double *v_onset;                  /* [N_SLOT*N] onset velocity, 0 when the contact is open */
     double *delta_prev, *ddelta_prev; /* [N_SLOT*N] at the last accepted point */
     double v_ref, Kp, Ki;             /* inputs and tunables in force */
+    double F_group[DRIVE_GROUPS];     /* external drive: each group's thrust per motor, saturated */
+    double *F_motor;                  /* [n_motors] external drive: each motor's thrust (from its group) */
 } ChainState;
 
 /* Right-hand-side code paths (solver.vector_path): the scalar one runs
@@ -204,10 +214,23 @@ int chain_load_layout(const char *name, const char *resource_dir, LayoutSpec *sp
 double drive_overlap(const ChainModel *m, double s_plate);
 /* PI controller: thrust command per motor and the integrator derivative. */
 double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot);
-/* Thrust F on a cart whose axle is at arc length s_axle (the command's
- * share under the motors it covers, with the ripple if on); *hint is the
- * cart's motor hint. Returns 0 when no motor is under its plate (then the
- * cart gets no thrust at all). */
-int drive_thrust(const ChainModel *m, double s_axle, int *hint, double F_cmd, double *F);
+/* Thrust F on a cart whose axle is at arc length s_axle: the command's
+ * share under the motors it covers (F_motor NULL), or with the external
+ * drive each covering motor's own thrust F_motor[k] by its share; with the
+ * ripple if on. *hint is the cart's motor hint. Returns 0 when no motor is
+ * under its plate (then the cart gets no thrust at all). */
+int drive_thrust(const ChainModel *m, const double *F_motor, double s_axle, int *hint, double F_cmd, double *F);
+/* Can a motor push at all (a motor exists, and a command, an external thrust or the ripple is on)? */
+static inline int drive_acts(const ChainModel *m, double F_cmd) {
+    return m->track.n_motors > 0 && (F_cmd != 0.0 || m->fx.ripple_on || m->drive_mode == DRIVE_EXTERNAL);
+}
+/* Each motor's own thrust under the external drive; NULL under the internal one. */
+static inline const double *drive_motors(const Chain *c) {
+    return c->m.drive_mode == DRIVE_EXTERNAL ? c->st.F_motor : NULL;
+}
+/* Per motor group: the thrust on the chain, the coverage-weighted tangential
+ * speed of the plates over it and the thrust's power, at the current
+ * scratch (outputs only). */
+void drive_groups(const Chain *c, double *F, double *v, double *P);
 
 #endif

@@ -20,6 +20,19 @@ static double mechanical_energy(const Chain *c) {
     return E;
 }
 
+/* The cart whose axle passed arc position s last: the smallest distance
+ * behind it along the direction of travel. */
+static int cart_past(const Chain *c, double s) {
+    double L = c->m.track.length, best = INFINITY;
+    int who = 0;
+    for (int i = 0; i < c->m.n_carts; i++) {
+        double d = fmod(s - c->sc.cart[i].s, L);
+        if (d < 0) d += L;
+        if (d < best) { best = d; who = i; }
+    }
+    return who;
+}
+
 void chain_outputs(Chain *c, LSSOutputs *o) {
     const ChainModel *m = &c->m;
     const ChainScratch *sc = &c->sc;
@@ -49,6 +62,30 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->drive_F_total = sc->F_total;
     o->drive_P_total = sc->P_total;
     o->drive_F_cmd = sc->F_cmd;
+    double gF[DRIVE_GROUPS], gv[DRIVE_GROUPS], gP[DRIVE_GROUPS];
+    drive_groups(c, gF, gv, gP);
+    double *oF[DRIVE_GROUPS] = {&o->drive_group1_F_total, &o->drive_group2_F_total, &o->drive_group3_F_total,
+                                &o->drive_group4_F_total, &o->drive_group5_F_total, &o->drive_group6_F_total,
+                                &o->drive_group7_F_total, &o->drive_group8_F_total};
+    double *ov[DRIVE_GROUPS] = {&o->drive_group1_v, &o->drive_group2_v, &o->drive_group3_v, &o->drive_group4_v,
+                                &o->drive_group5_v, &o->drive_group6_v, &o->drive_group7_v, &o->drive_group8_v};
+    double *oP[DRIVE_GROUPS] = {&o->drive_group1_P, &o->drive_group2_P, &o->drive_group3_P, &o->drive_group4_P,
+                                &o->drive_group5_P, &o->drive_group6_P, &o->drive_group7_P, &o->drive_group8_P};
+    for (int g = 0; g < DRIVE_GROUPS; g++) {
+        *oF[g] = gF[g];
+        *ov[g] = gv[g];
+        *oP[g] = gP[g];
+    }
+    double jmax = -1.0;
+    int jwho = 0;
+    for (int i = 0; i < m->n_carts; i++) {
+        double fa = sc->force[N_SLOT * i + SLOT_JA], fr = sc->force[N_SLOT * i + SLOT_JR], f = sqrt(fa * fa + fr * fr);
+        if (f > jmax) { jmax = f; jwho = i; }
+    }
+    o->chain_joint_F_max = jmax;
+    o->chain_joint_F_max_cart = jwho;
+    o->station_induction_cart = cart_past(c, m->station_s[STATION_INDUCTION]);
+    o->station_chute_cart = cart_past(c, m->station_s[STATION_CHUTE]);
     const double *gl = c->st.y + CART_NY * m->n_carts;
     o->energy_E_mech = mechanical_energy(c);
     o->energy_W_motor = gl[G_WMOT];

@@ -43,8 +43,10 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     ContactLaw saved[CC_N];
     memcpy(saved, m->law, sizeof saved);
     double mu = m->mu_roll, v_ref = st->v_ref, Kp = st->Kp, Ki = st->Ki;
+    int mode = m->drive_mode;
     for (int k = 0; k < CC_N; k++) m->law[k].chi = contact_chi(m->law_code, RELAX_COR);
     m->mu_roll = 0.0;
+    m->drive_mode = DRIVE_INTERNAL;   /* drive off: no external thrust either */
     st->v_ref = st->Kp = st->Ki = 0.0;
     double tol = c->ode.tol;
     c->ode.tol = 10.0 * tol < RELAX_TOL_MAX ? 10.0 * tol : RELAX_TOL_MAX;  /* an equilibrium, not a trajectory */
@@ -66,6 +68,7 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     c->ode.tol = tol;
     memcpy(m->law, saved, sizeof saved);
     m->mu_roll = mu;
+    m->drive_mode = mode;
     st->v_ref = v_ref;
     st->Kp = Kp;
     st->Ki = Ki;

@@ -293,11 +293,12 @@ void simd_drive(Chain *c, double F_cmd) {
     const ChainModel *m = &c->m;
     ChainScratch *sc = &c->sc;
     sc->F_total = sc->P_total = 0.0;
-    if (m->track.n_motors == 0 || (F_cmd == 0.0 && !m->fx.ripple_on)) return;
+    if (!drive_acts(m, F_cmd)) return;
+    const double *Fk = drive_motors(c);
     const double xm = m->g.x_motor, zm = m->g.z_motor;
     for (int i = 0; i < S->N; i++) {
         double F;
-        if (!drive_thrust(m, S->s[i], &sc->cart[i].motor, F_cmd, &F)) continue;
+        if (!drive_thrust(m, Fk, S->s[i], &sc->cart[i].motor, F_cmd, &F)) continue;
         double rm[3], w[3], v[3], fv[3], tmp[3];
         for (int k = 0; k < 3; k++) {
             rm[k] = S->R[3 * k][i] * xm + S->R[3 * k + 2][i] * zm;
@@ -319,7 +320,7 @@ void simd_drive(Chain *c, double F_cmd) {
 /* The thrust of cart i by the scalar walk (drive_thrust): for a plate
  * outside its window of candidates, or with more motors than it holds. */
 void simd_drive_lane(Chain *c, int i, double F_cmd, double *F) {
-    if (!drive_thrust(&c->m, c->simd->s[i], &c->sc.cart[i].motor, F_cmd, F)) *F = 0.0;
+    if (!drive_thrust(&c->m, drive_motors(c), c->simd->s[i], &c->sc.cart[i].motor, F_cmd, F)) *F = 0.0;
 }
 
 /* The globals' derivatives and the transducer's joint quantities. */

@@ -711,8 +711,8 @@ void SIMD_ENTRY(Chain *c, const double *y, double *dy) {
     double sum_vt = vsum_range(S->vt, S->N), zdot;
     double F_cmd = drive_command(m, &c->st, sum_vt / S->N, y[CART_NY * S->N + G_INT], &zdot);
     k_joints(c);
-    /* the motors: in the last kernel, or by the scalar walk where the ripple is on */
-    int vdrive = m->track.n_motors > 0 && F_cmd != 0.0 && !m->fx.ripple_on;
+    /* the motors: in the last kernel, or by the scalar walk where the ripple or the external drive is on */
+    int vdrive = m->track.n_motors > 0 && F_cmd != 0.0 && !m->fx.ripple_on && m->drive_mode == DRIVE_INTERNAL;
     if (!vdrive) simd_drive(c, F_cmd);
     k_newton_euler(c, dy, F_cmd, vdrive);
     simd_finish(c, y, dy, F_cmd, zdot, sum_vt);

@@ -27,12 +27,13 @@ static double overlap(double a0, double a1, double b0, double b1) {
  * later, so the loop closes without wrapping arc lengths. The motors are
  * sorted by their start; a motor is at most motor_length long.
  * With the constant with_ripple, *ripple also receives the sum of
- * w sin(2 pi x / p + phi), x the plate centre from the motor start; without
- * it the loop is the plain one. */
+ * w sin(2 pi x / p + phi), x the plate centre from the motor start; with
+ * Fk (each motor's own thrust, the external drive) *weighted receives the
+ * sum of w Fk; without either the loop is the plain one. */
 static DRIVE_INLINE double overlap_sum(const ChainModel *m, double s_plate, int lo, const int with_ripple,
-                                       double *ripple) {
+                                       double *ripple, const double *Fk, double *weighted) {
     const Track *t = &m->track;
-    double half = 0.5 * m->g.plate_length, L = t->length, frac = 0.0, rs = 0.0;
+    double half = 0.5 * m->g.plate_length, L = t->length, frac = 0.0, rs = 0.0, wf = 0.0;
     int nm = t->n_motors;
     /* forwards: motors starting before the plate's end */
     for (int k = lo; k < lo + nm; k++) {
@@ -42,6 +43,7 @@ static DRIVE_INLINE double overlap_sum(const ChainModel *m, double s_plate, int 
         if (s1 > s0) {
             double w = overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
             frac += w;
+            if (Fk) wf += w * Fk[kk];
             if (with_ripple && w > 0.0) rs += w * sin(m->fx.ripple_k * (s_plate - s0) + m->fx.ripple_phase);
         }
     }
@@ -53,20 +55,23 @@ static DRIVE_INLINE double overlap_sum(const ChainModel *m, double s_plate, int 
         if (s1 > s0) {
             double w = overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
             frac += w;
+            if (Fk) wf += w * Fk[kk];
             if (with_ripple && w > 0.0) rs += w * sin(m->fx.ripple_k * (s_plate - s0) + m->fx.ripple_phase);
         }
     }
     if (with_ripple) *ripple = rs;
+    if (Fk) *weighted = wf;
     return frac;
 }
 
 static double overlap_from(const ChainModel *m, double s_plate, int lo) {
-    return overlap_sum(m, s_plate, lo, 0, NULL);
+    return overlap_sum(m, s_plate, lo, 0, NULL, NULL, NULL);
 }
 
-/* out of line: the plain thrust path stays as lean as without the ripple */
-static DRIVE_NOINLINE double overlap_ripple_from(const ChainModel *m, double s_plate, int lo, double *ripple) {
-    return overlap_sum(m, s_plate, lo, 1, ripple);
+/* out of line: the plain thrust path stays as lean as without the ripple or the external drive */
+static DRIVE_NOINLINE double overlap_other_from(const ChainModel *m, double s_plate, int lo, double *ripple,
+                                                const double *Fk, double *weighted) {
+    return overlap_sum(m, s_plate, lo, m->fx.ripple_on, ripple, Fk, weighted);
 }
 
 double drive_overlap(const ChainModel *m, double s_plate) {
@@ -106,6 +111,10 @@ static int motor_from_hint(const ChainModel *m, double s_plate, int *hint) {
 #define ANTIWINDUP_BAND 1e-3
 
 double drive_command(const ChainModel *m, const ChainState *st, double v_mean, double z, double *zdot) {
+    if (m->drive_mode == DRIVE_EXTERNAL) {  /* the motors take their thrust from the inputs; the PI rests */
+        *zdot = 0.0;
+        return 0.0;
+    }
     double e = st->v_ref - v_mean;
     double u = st->Kp * e + st->Ki * z;
     double Fm = m->F_max, band = ANTIWINDUP_BAND * m->F_max, gate = 1.0;
@@ -116,16 +125,16 @@ double drive_command(const ChainModel *m, const ChainState *st, double v_mean, d
     return F;
 }
 
-int drive_thrust(const ChainModel *m, double s_axle, int *hint, double F_cmd, double *F) {
+int drive_thrust(const ChainModel *m, const double *F_motor, double s_axle, int *hint, double F_cmd, double *F) {
     double s_plate = s_axle - (m->g.x_axle - m->g.x_motor), frac;
     int lo = motor_from_hint(m, s_plate, hint);
-    if (!m->fx.ripple_on) {
+    if (!m->fx.ripple_on && !F_motor) {
         frac = overlap_from(m, s_plate, lo);
         *F = F_cmd * frac;
     } else {
-        double rsum;
-        frac = overlap_ripple_from(m, s_plate, lo, &rsum);
-        *F = F_cmd * frac + m->fx.ripple_A * rsum;
+        double rsum = 0.0, wsum = 0.0;
+        frac = overlap_other_from(m, s_plate, lo, &rsum, F_motor, &wsum);
+        *F = (F_motor ? wsum : F_cmd * frac) + (m->fx.ripple_on ? m->fx.ripple_A * rsum : 0.0);
     }
     return !(frac <= 0);
 }
@@ -135,9 +144,9 @@ void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     const ChainModel *m = &c->m;
     ChainScratch *sc = &c->sc;
     CartScratch *cs = &sc->cart[i];
-    if (m->track.n_motors == 0 || (F_cmd == 0.0 && !m->fx.ripple_on)) return;
+    if (!drive_acts(m, F_cmd)) return;
     double F;
-    if (!drive_thrust(m, cs->s, &cs->motor, F_cmd, &F)) return;
+    if (!drive_thrust(m, drive_motors(c), cs->s, &cs->motor, F_cmd, &F)) return;
     const double *yi = y + CART_NY * i;
     const double *R = cs->R, *ww = cs->ww;
     double bm[3] = {m->g.x_motor, 0.0, m->g.z_motor}, rm[3], v[3], fv[3], tmp[3];
@@ -150,4 +159,48 @@ void drive_forces(Chain *c, const double *y, int i, double F_cmd) {
     v3_add(cs->T, cs->T, tmp);
     sc->F_total += F;
     sc->P_total += v3_dot(fv, v);
+}
+
+/* Adds to the groups what one plate gets from each motor it covers (the
+ * walk of overlap_sum, one motor at a time). */
+static void plate_groups(const Chain *c, double s_plate, int lo, double v_t, double F_cmd, double *F, double *wv,
+                         double *w_sum, double *P) {
+    const ChainModel *m = &c->m;
+    const Track *t = &m->track;
+    const double *Fk = drive_motors(c);
+    double half = 0.5 * m->g.plate_length, L = t->length;
+    int nm = t->n_motors;
+    for (int dir = 0; dir < 2; dir++)
+        for (int j = 0; j < nm; j++) {
+            int k = dir == 0 ? lo + j : lo - 1 - j;
+            int kk = k >= nm ? k - nm : (k < 0 ? k + nm : k);
+            double shift = k >= nm ? L : (k < 0 ? -L : 0.0), s0 = t->motor_s0[kk] + shift, s1 = t->motor_s1[kk] + shift;
+            if (dir == 0 && s0 >= s_plate + half) break;
+            if (dir == 1 && s0 + m->motor_length <= s_plate - half) break;
+            if (!(s1 > s0)) continue;
+            double w = overlap(s_plate - half, s_plate + half, s0, s1) / (s1 - s0);
+            if (!(w > 0.0)) continue;
+            double f = w * (Fk ? Fk[kk] : F_cmd);
+            if (m->fx.ripple_on) f += m->fx.ripple_A * w * sin(m->fx.ripple_k * (s_plate - s0) + m->fx.ripple_phase);
+            int g = m->motor_group[kk];
+            F[g] += f;
+            P[g] += f * v_t;
+            wv[g] += w * v_t;
+            w_sum[g] += w;
+        }
+}
+
+void drive_groups(const Chain *c, double *F, double *v, double *P) {
+    const ChainModel *m = &c->m;
+    double w_sum[DRIVE_GROUPS] = {0};
+    for (int g = 0; g < DRIVE_GROUPS; g++) F[g] = v[g] = P[g] = 0.0;
+    if (m->track.n_motors == 0) return;
+    for (int i = 0; i < m->n_carts; i++) {
+        const CartScratch *cs = &c->sc.cart[i];
+        double s_plate = cs->s - (m->g.x_axle - m->g.x_motor);
+        int hint = cs->motor;
+        int lo = motor_from_hint(m, s_plate, &hint);
+        plate_groups(c, s_plate, lo, cs->v_t, c->sc.F_cmd, F, v, w_sum, P);
+    }
+    for (int g = 0; g < DRIVE_GROUPS; g++) v[g] = w_sum[g] > 0 ? v[g] / w_sum[g] : 0.0;
 }

@@ -295,6 +295,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
     in->start_time = in->time = 0.0;
     in->chain_stale = 1;
     in->setup_done = 0;
+    in->thrust_set = in->thrust_warned = 0;
     return fmi2OK;
 }
 
@@ -398,9 +399,22 @@ static fmi2Status commit(Instance *in, const char *fn, const LSSParams *backup, 
     return fmi2OK;
 }
 
+/* A motor group's thrust input (drive.groupK.F)? */
+static int is_group_thrust(const LSSVarInfo *v) {
+    size_t n = strlen(v->name);
+    return strncmp(v->name, "drive.group", 11) == 0 && n > 2 && strcmp(v->name + n - 2, ".F") == 0;
+}
+
 static fmi2Status set_number(Instance *in, const char *fn, fmi2ValueReference vr, LSSType type, double x) {
     const LSSVarInfo *v = lookup(in, fn, vr, type);
     if (!v || !settable(in, fn, v)) return fmi2Error;
+    if (is_group_thrust(v)) {
+        in->thrust_set = 1;
+        if (isfinite(x) && fabs(x) > in->p.drive_F_max && fabs(x) <= 1e6)
+            lss_log(in, fmi2Warning, "logStatusWarning", "%s: %s = %g N is beyond the motors' rating "
+                    "drive.F_max = %g N: saturated to %g N", fn, v->name, x, in->p.drive_F_max,
+                    x > 0 ? in->p.drive_F_max : -in->p.drive_F_max);
+    }
     LSSParams backup = in->p;
     void *slot = slot_of(in, v);
     if (type == LSS_REAL) *(double *)slot = x;
@@ -498,6 +512,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
                   "inconsistent); call fmi2Reset or set a valid FMU state", in->chain->st.ode.t,
                   in->time - in->start_time);
         return fmi2Error;
+    }
+    if (in->p.drive_mode == DRIVE_EXTERNAL && !in->thrust_set && !in->thrust_warned) {
+        in->thrust_warned = 1;
+        lss_log(in, fmi2Warning, "logStatusWarning", "fmi2DoStep: drive.mode = 1 (external thrust) but no "
+                "drive.groupK.F input has been set: the motors push with 0 N until the master sets them");
     }
     if (chain_step(in->chain, t_end, err, sizeof err) != 0) {
         in->state = ST_STEP_FAILED;

@@ -36,6 +36,8 @@ typedef struct {
     int stop_time_defined;
     double stop_time;
     char string_out[LSS_STRING_MAX];
+    int thrust_set;         /* a drive.groupK.F input was set since fmi2Instantiate or fmi2Reset */
+    int thrust_warned;      /* the external drive's unset thrust was logged */
 } Instance;
 
 /* Below this relative tolerance the Runge-Kutta pair cannot make progress in

@@ -12,7 +12,7 @@
 #include "lss_guid.h"
 
 #define SNAP_MAGIC 0x4C5353434841494EULL /* "LSSCHAIN" */
-#define SNAP_VERSION 2
+#define SNAP_VERSION 3
 
 typedef struct {
     unsigned long long magic;

@@ -43,6 +43,7 @@ class Var:
 
 
 P, CP, IN, OUT = "parameter", "calculatedParameter", "input", "output"
+N_GROUPS = 8   # motor groups a plant model can drive (drive.n_groups <= N_GROUPS)
 
 FORCE_CHANNELS = [
     "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
@@ -209,6 +210,38 @@ VARIABLES: list[Var] = [
         start=0, min=0, max=1),
     Var("solver.vector_path_used", "Integer", CP, "fixed",
         "right-hand-side code path in use: 1 scalar, 2 AVX2, 3 AVX-512"),
+    # --- issue 52: the chain in a plant model (inputs a system model drives, outputs it reads) -------
+    Var("drive.mode", "Integer", P, "fixed",
+        "0: the internal PI speed controller commands every motor (drive.v_ref, drive.Kp, drive.Ki); "
+        "1: external: each motor group's thrust is an input (drive.groupK.F), the PI is off",
+        start=0, min=0, max=1),
+    Var("drive.n_groups", "Integer", P, "fixed",
+        "motor groups: the motors in track order, split into this many groups of (nearly) equal count; "
+        "at most the number of motors", start=1, min=1, max=N_GROUPS),
+    *[Var(f"drive.group{k}.F", "Real", IN, "continuous",
+          f"external mode: thrust of each motor of group {k} on a plate it fully covers; "
+          "saturated at +-drive.F_max (logged)", "N", 0.0, -1e6, 1e6) for k in range(1, N_GROUPS + 1)],
+    *[v for k in range(1, N_GROUPS + 1) for v in (
+        Var(f"drive.group{k}.F_total", "Real", OUT, "continuous",
+            f"thrust the motors of group {k} apply to the chain (the groups sum to drive.F_total)", "N"),
+        Var(f"drive.group{k}.v", "Real", OUT, "continuous",
+            f"tangential speed of the chain over group {k}'s motors (plates weighted by their coverage; "
+            "0 where no plate covers them)", "m/s"),
+        Var(f"drive.group{k}.P", "Real", OUT, "continuous",
+            f"power of group {k}'s thrust (its plates' thrust times their tangential speed)", "W"))],
+    Var("chain.joint.F_max", "Real", OUT, "continuous",
+        "largest joint force in the chain (axial and radial together)", "N"),
+    Var("chain.joint.F_max_cart", "Integer", OUT, "discrete",
+        "the cart whose front joint carries chain.joint.F_max"),
+    Var("station.induction.s", "Real", P, "fixed",
+        "arc position of the induction station (where items are put on carts), in [0, track length)",
+        "m", 0.0, 0.0, 1e6),
+    Var("station.chute.s", "Real", P, "fixed",
+        "arc position of the chute (where items leave their carts), in [0, track length)", "m", 0.0, 0.0, 1e6),
+    Var("station.induction.cart", "Integer", OUT, "discrete",
+        "the cart whose axle passed the induction station last (changes as the next cart passes)"),
+    Var("station.chute.cart", "Integer", OUT, "discrete",
+        "the cart whose axle passed the chute last"),
 ]
 
 BY_NAME = {v.name: v for v in VARIABLES}
