@@ -76,6 +76,9 @@ static int allocate(Chain *c) {
     c->m.mass = xcalloc(c, N, sizeof(double), &fail);
     c->m.inertia = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
     size_t nm = (size_t)(c->m.track.n_motors > 0 ? c->m.track.n_motors : 1);
+    c->m.mass0 = xcalloc(c, N, sizeof(double), &fail);
+    c->m.inertia0 = xcalloc(c, (size_t)3 * N, sizeof(double), &fail);
+    c->st.load = xcalloc(c, N, sizeof(double), &fail);
     c->m.motor_group = xcalloc(c, nm, sizeof(int), &fail);
     c->st.F_motor = xcalloc(c, nm, sizeof(double), &fail);
     if (!fail)  /* the motors in track order, in groups of (nearly) equal count */
@@ -93,7 +96,8 @@ void chain_free(Chain *c) {
                     c->ode.k[0], c->ode.k[1], c->ode.k[2], c->ode.k[3], c->ode.k[4], c->ode.k[5], c->ode.k[6],
                     c->ode.k[7], c->ode.k[8], c->ode.k[9], c->ode.k[10], c->ode.k[11], c->ode.k[12],
                     c->ode.ytmp, c->ode.ynew, c->dy_scratch, c->m.err_scale, c->m.err_rel,
-                    c->m.mass, c->m.inertia, c->m.motor_group, c->st.F_motor};
+                    c->m.mass, c->m.inertia, c->m.motor_group, c->st.F_motor, c->m.mass0, c->m.inertia0,
+                    c->st.load};
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
         if (ptrs[i]) a.free(ptrs[i]);
     track_free(&c->m.track, &a);
@@ -214,9 +218,19 @@ Chain *chain_create(const LSSParams *p, const char *resource_dir, const LSSAlloc
     for (int i = 0; i < m->n_carts; i++) {
         /* factor 1 (every effect off) keeps the cart's mass and inertia bit for bit */
         double f = effects_mass_factor(p, i, m->transducer);
-        m->mass[i] = m->g.mass * f;
-        for (int k = 0; k < 3; k++) m->inertia[3 * i + k] = m->g.inertia[k] * f;
+        m->mass0[i] = m->g.mass * f;
+        for (int k = 0; k < 3; k++) m->inertia0[3 * i + k] = m->g.inertia[k] * f;
     }
+    /* the items the ports name at the start ride from the start (no momentum to share yet) */
+    if (chain_check_inputs(c, p, err, errlen)) goto fail;
+    const int pc[LOAD_PORTS] = {p->load1_cart, p->load2_cart};
+    const double pm[LOAD_PORTS] = {p->load1_mass, p->load2_mass};
+    for (int k = 0; k < LOAD_PORTS; k++) {
+        if (pc[k] >= 0) c->st.load[pc[k]] = pm[k];
+        c->st.port[2 * k] = pc[k];
+        c->st.port[2 * k + 1] = pm[k];
+    }
+    chain_masses(c);
     if (chain_simd_init(c, p->solver_vector_path)) {
         snprintf(err, errlen, "out of memory for a chain of %d carts", m->n_carts);
         goto fail;
@@ -238,6 +252,59 @@ fail_spec:
 fail:
     chain_free(c);
     return NULL;
+}
+
+void chain_masses(Chain *c) {
+    ChainModel *m = &c->m;
+    for (int i = 0; i < m->n_carts; i++) {
+        double M = m->mass0[i] + c->st.load[i];
+        m->mass[i] = M;
+        /* the item rides at the cart's CG with the cart's own distribution (1 bit for bit without one) */
+        double f = c->st.load[i] == 0.0 ? 1.0 : M / m->mass0[i];
+        for (int k = 0; k < 3; k++) m->inertia[3 * i + k] = m->inertia0[3 * i + k] * f;
+    }
+    chain_simd_masses(c);
+}
+
+int chain_check_inputs(const Chain *c, const LSSParams *p, char *err, size_t errlen) {
+    const int pc[LOAD_PORTS] = {p->load1_cart, p->load2_cart};
+    for (int k = 0; k < LOAD_PORTS; k++)
+        if (pc[k] >= c->m.n_carts) {
+            snprintf(err, errlen, "load%d.cart = %d is invalid: the chain has %d carts (0..%d; -1: the port is idle)",
+                     k + 1, pc[k], c->m.n_carts, c->m.n_carts - 1);
+            return 1;
+        }
+    return 0;
+}
+
+/* Cart i now carries an item of `mass` kg. An item put on arrives with no
+ * velocity: the cart's momentum (and, the item riding at its CG with its
+ * own distribution, its angular momentum) is shared with it; one taken off
+ * leaves at the cart's velocity. E_items takes the change of mechanical
+ * energy (the inelastic loss, the item's weight) so that the balance holds. */
+static void put_item(Chain *c, int i, double mass) {
+    ChainModel *m = &c->m;
+    ChainState *st = &c->st;
+    double old = st->load[i];
+    if (mass == old) return;
+    double M_old = m->mass0[i] + old, M_new = m->mass0[i] + mass, f = M_old / M_new;
+    double *y = st->y + CART_NY * i, *v = y + 7, *w = y + 10, I[3];
+    double E0 = 0.5 * M_old * v3_dot(v, v) + M_old * m->gravity * y[2];
+    for (int k = 0; k < 3; k++) E0 += 0.5 * m->inertia[3 * i + k] * w[k] * w[k];
+    if (mass > old)
+        for (int k = 0; k < 3; k++) {
+            v[k] *= f;
+            w[k] *= f;
+        }
+    st->load[i] = mass;
+    chain_masses(c);
+    for (int k = 0; k < 3; k++) I[k] = m->inertia[3 * i + k];
+    double E1 = 0.5 * M_new * v3_dot(v, v) + M_new * m->gravity * y[2];
+    for (int k = 0; k < 3; k++) E1 += 0.5 * I[k] * w[k] * w[k];
+    st->E_items += E1 - E0;
+    st->ode.fsal_valid = 0;
+    c->scratch_at_state = 0;
+    chain_simd_invalidate(c);
 }
 
 void chain_set_inputs(Chain *c, const LSSParams *p) {
@@ -268,6 +335,15 @@ void chain_set_inputs(Chain *c, const LSSParams *p) {
             changed = 1;
         }
     }
+    /* an item port acts when its cart or its mass changed (chain_check_inputs has checked the cart) */
+    const int pc[LOAD_PORTS] = {p->load1_cart, p->load2_cart};
+    const double pm[LOAD_PORTS] = {p->load1_mass, p->load2_mass};
+    for (int k = 0; k < LOAD_PORTS; k++) {
+        if (pc[k] == c->st.port[2 * k] && pm[k] == c->st.port[2 * k + 1]) continue;
+        c->st.port[2 * k] = pc[k];
+        c->st.port[2 * k + 1] = pm[k];
+        if (pc[k] >= 0 && pc[k] < m->n_carts) put_item(c, pc[k], pm[k]);
+    }
     if (changed) c->st.ode.fsal_valid = c->scratch_at_state = 0;
     m->mu_roll = p->wheel_mu_roll;
     c->st.v_ref = p->drive_v_ref;
@@ -290,12 +366,14 @@ void chain_start_memory(Chain *c) {
     c->scratch_at_state = 1;
 }
 
-/* Snapshot layout: header, then y, s_hint, v_onset, delta_prev, ddelta_prev
+/* Snapshot layout: header (solver, inputs in force: the PI's, the groups'
+ * thrusts, the item ports as applied, E_items), then y, s_hint, v_onset,
+ * delta_prev, ddelta_prev, the FSAL derivative and the item loads
  * and the FSAL derivative, so that a restored run replays bit for bit. */
-#define SNAP_HEADER 20
+#define SNAP_HEADER 25
 
 size_t chain_state_size(const Chain *c) {
-    return (size_t)SNAP_HEADER + 2 * (size_t)c->m.n_y + (size_t)c->m.n_carts * (1 + 3 * N_SLOT);
+    return (size_t)SNAP_HEADER + 2 * (size_t)c->m.n_y + (size_t)c->m.n_carts * (2 + 3 * N_SLOT);
 }
 
 void chain_state_save(const Chain *c, double *buf) {
@@ -306,6 +384,8 @@ void chain_state_save(const Chain *c, double *buf) {
                                (double)o->n_steps, (double)o->n_rejected, (double)o->n_rhs, o->h_last,
                                (double)o->fsal_valid};
     for (int g = 0; g < DRIVE_GROUPS; g++) hdr[12 + g] = st->F_group[g];
+    for (int k = 0; k < 2 * LOAD_PORTS; k++) hdr[20 + k] = st->port[k];
+    hdr[24] = st->E_items;
     memcpy(buf, hdr, sizeof hdr);
     double *p = buf + SNAP_HEADER;
     memcpy(p, st->y, sizeof(double) * (size_t)c->m.n_y); p += c->m.n_y;
@@ -313,7 +393,8 @@ void chain_state_save(const Chain *c, double *buf) {
     memcpy(p, st->v_onset, sizeof(double) * (size_t)ns); p += ns;
     memcpy(p, st->delta_prev, sizeof(double) * (size_t)ns); p += ns;
     memcpy(p, st->ddelta_prev, sizeof(double) * (size_t)ns); p += ns;
-    memcpy(p, c->ode.k[0], sizeof(double) * (size_t)c->m.n_y);
+    memcpy(p, c->ode.k[0], sizeof(double) * (size_t)c->m.n_y); p += c->m.n_y;
+    memcpy(p, st->load, sizeof(double) * (size_t)N);
 }
 
 /* Counters are stored as doubles: whole numbers in [0, 2^53]. */
@@ -330,8 +411,8 @@ static int is_count(double x) { return x >= 0 && x <= 9007199254740992.0 && x ==
  * the track are then left to the second call). 0, or 1 with the reason. */
 int chain_state_check(const double *buf, size_t n, const LSSParams *built, double t_chain, int exact,
                       const Chain *c, char *why, size_t len) {
-    if (n < SNAP_HEADER + 24 || (n - SNAP_HEADER - 12) % 45 != 0) BAD("chain snapshot of %zu values", n);
-    size_t N = (n - SNAP_HEADER - 12) / 45, ny = CART_NY * N + N_GLOBAL, ns = N_SLOT * N;
+    if (n < SNAP_HEADER + 24 || (n - SNAP_HEADER - 12) % 46 != 0) BAD("chain snapshot of %zu values", n);
+    size_t N = (n - SNAP_HEADER - 12) / 46, ny = CART_NY * N + N_GLOBAL, ns = N_SLOT * N;
     if (N < 3 || buf[0] != (double)ny || (c && (size_t)c->m.n_y != ny))
         BAD("chain snapshot: state size %.17g does not match its %zu values", buf[0], n);
     double t = buf[1], h = buf[2], err_prev = buf[3], h_last = buf[10];
@@ -383,6 +464,16 @@ int chain_state_check(const double *buf, size_t n, const LSSParams *built, doubl
             BAD("contact %zu: onset velocity %.17g m/s is neither 0 nor >= contact.v_min", k, v_onset[k]);
     for (size_t k = 0; k < 2 * ns + ny; k++)  /* delta_prev, ddelta_prev and the FSAL derivative */
         if (!isfinite(rest[k])) BAD("contact memory or derivative value %zu is %g", k, rest[k]);
+    const double *load = rest + 2 * ns + ny;
+    for (size_t i = 0; i < N; i++)
+        if (!(load[i] >= 0.0 && load[i] <= 1000.0)) BAD("cart %zu: item mass %.17g kg is not in [0, 1000]", i, load[i]);
+    const int pc[LOAD_PORTS] = {built->load1_cart, built->load2_cart};
+    const double pm[LOAD_PORTS] = {built->load1_mass, built->load2_mass};
+    for (int k = 0; k < LOAD_PORTS; k++)
+        if (buf[20 + 2 * k] != pc[k] || buf[21 + 2 * k] != pm[k])
+            BAD("item port %d in the chain snapshot (cart %.17g, %.17g kg) differs from the state's parameters", k + 1,
+                buf[20 + 2 * k], buf[21 + 2 * k]);
+    if (!isfinite(buf[24])) BAD("item energy %g J is not finite", buf[24]);
     return 0;
 }
 #undef BAD
@@ -402,7 +493,11 @@ void chain_state_load(Chain *c, const double *buf) {
     memcpy(st->v_onset, p, sizeof(double) * (size_t)ns); p += ns;
     memcpy(st->delta_prev, p, sizeof(double) * (size_t)ns); p += ns;
     memcpy(st->ddelta_prev, p, sizeof(double) * (size_t)ns); p += ns;
-    memcpy(c->ode.k[0], p, sizeof(double) * (size_t)c->m.n_y);
+    memcpy(c->ode.k[0], p, sizeof(double) * (size_t)c->m.n_y); p += c->m.n_y;
+    memcpy(st->load, p, sizeof(double) * (size_t)N);
+    for (int k = 0; k < 2 * LOAD_PORTS; k++) st->port[k] = buf[20 + k];
+    st->E_items = buf[24];
+    chain_masses(c);
     o->fsal_valid = buf[11] != 0;
     c->scratch_at_state = 0;
     chain_simd_invalidate(c);

@@ -35,6 +35,7 @@
 #define DRIVE_GROUPS 8   /* motor groups a plant model can drive: drive.group1.F .. (lss_fmu.variables.N_GROUPS) */
 enum { DRIVE_INTERNAL = 0, DRIVE_EXTERNAL = 1 };
 enum { STATION_INDUCTION = 0, STATION_CHUTE, N_STATION };
+#define LOAD_PORTS 2     /* item ports load1.*, load2.* (lss_fmu.variables.N_LOAD_PORTS) */
 
 enum { CC_JA = 0, CC_JR, CC_SW, CC_RW, CC_N };          /* contact classes */
 enum { W_SL = 0, W_SR, W_DL, W_DR, N_WHEEL };          /* wheels of one cart */
@@ -83,8 +84,9 @@ typedef struct ChainModel {
     double s_start;                   /* arc position of cart 0's axle as assembled, m */
     int method;                       /* LSS_METHOD_*: the embedded pair */
     Effects fx;                       /* the effects catalogue (effects.h) */
-    double *mass;                     /* [N] mass of each cart, kg (g.mass unless the masses differ) */
-    double *inertia;                  /* [3N] its principal moments, kg m^2 */
+    double *mass;                     /* [N] mass of each cart with its item, kg (from mass0 and ChainState.load) */
+    double *inertia;                  /* [3N] its principal moments, kg m^2 (inertia0 scaled with the mass) */
+    double *mass0, *inertia0;         /* [N], [3N] the carts' own (g.mass unless the masses differ) */
     double *err_scale;                /* per state: absolute scale of the error norm */
     double *err_rel;                  /* per state: 1 if the error is also relative to |y| */
     int drive_mode;                   /* DRIVE_INTERNAL (the PI) or DRIVE_EXTERNAL (thrust inputs per group) */
@@ -133,6 +135,9 @@ typedef struct ChainState {
     double v_ref, Kp, Ki;             /* inputs and tunables in force */
     double F_group[DRIVE_GROUPS];     /* external drive: each group's thrust per motor, saturated */
     double *F_motor;                  /* [n_motors] external drive: each motor's thrust (from its group) */
+    double *load;                     /* [N] the item mass each cart carries, kg */
+    double port[2 * LOAD_PORTS];      /* each item port's (cart, mass) as last applied */
+    double E_items;                   /* mechanical energy the item ports changed, J */
 } ChainState;
 
 /* Right-hand-side code paths (solver.vector_path): the scalar one runs
@@ -166,8 +171,15 @@ void chain_free(Chain *c);
  * or a message naming the variable and the value. */
 int chain_check_params(const LSSParams *p, char *err, size_t errlen);
 
-/* Adopts the tunable parameters and inputs (v_ref, Kp, Ki, the CoRs, mu_roll). */
+/* Adopts the tunable parameters and inputs (v_ref, Kp, Ki, the CoRs, mu_roll,
+ * the external thrusts, the item ports: a port whose cart or mass changed
+ * puts that mass on that cart). */
 void chain_set_inputs(Chain *c, const LSSParams *p);
+/* The inputs' rules that need the chain (an item port's cart below the
+ * number of carts); 0, or 1 with a message naming the input. */
+int chain_check_inputs(const Chain *c, const LSSParams *p, char *err, size_t errlen);
+/* Each cart's mass and inertia from its own and its item's (after the loads changed or were restored). */
+void chain_masses(Chain *c);
 
 /* Static equilibrium of a chain at rest: relaxes it for T s (drive off,
  * kinetic damping, fixed contact damping so that the result does not depend

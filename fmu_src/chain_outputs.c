@@ -86,6 +86,10 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->chain_joint_F_max_cart = jwho;
     o->station_induction_cart = cart_past(c, m->station_s[STATION_INDUCTION]);
     o->station_chute_cart = cart_past(c, m->station_s[STATION_CHUTE]);
+    double items = 0.0;
+    for (int i = 0; i < m->n_carts; i++) items += c->st.load[i];
+    o->chain_items_mass = items;
+    o->energy_E_items = c->st.E_items;
     const double *gl = c->st.y + CART_NY * m->n_carts;
     o->energy_E_mech = mechanical_energy(c);
     o->energy_W_motor = gl[G_WMOT];

@@ -107,14 +107,9 @@ int chain_simd_init(Chain *c, int requested) {
     S->chunk = u + NP;
     S->mfull = u + 2 * NP;
     S->fix = (int *)(((uintptr_t)(u + 3 * NP) + 7) & ~(uintptr_t)7);
+    c->simd = S;
+    chain_simd_masses(c);
     for (int i = 0; i < NP; i++) {
-        int j = i < N ? i : 0;
-        S->im[i] = 1.0 / c->m.mass[j];
-        for (int k = 0; k < 3; k++) {
-            S->In[k][i] = c->m.inertia[3 * j + k];
-            S->iI[k][i] = 1.0 / c->m.inertia[3 * j + k];
-        }
-        S->mg[i] = c->m.mass[j] * c->m.gravity;
         S->key[i] = NAN;  /* no base yet */
         S->mlo[i] = S->mhi[i] = NAN;
         for (int k = 0; k < SIMD_NMOT; k++) {  /* an empty slot overlaps nothing */
@@ -124,13 +119,26 @@ int chain_simd_init(Chain *c, int requested) {
     }
     S->vo_dirty = 1;
     S->synced = 0;
-    c->simd = S;
     return 0;
 }
 
 void chain_simd_free(Chain *c) {
     if (c->simd) c->m.alloc.free(c->simd->block);
     c->simd = NULL;
+}
+
+void chain_simd_masses(Chain *c) {
+    ChainSimd *S = c->simd;
+    if (!S) return;
+    for (int i = 0; i < S->NP; i++) {
+        int j = i < S->N ? i : 0;   /* the padding and the ghost: copies of cart 0 */
+        S->im[i] = 1.0 / c->m.mass[j];
+        for (int k = 0; k < 3; k++) {
+            S->In[k][i] = c->m.inertia[3 * j + k];
+            S->iI[k][i] = 1.0 / c->m.inertia[3 * j + k];
+        }
+        S->mg[i] = c->m.mass[j] * c->m.gravity;
+    }
 }
 
 void chain_simd_invalidate(Chain *c) {

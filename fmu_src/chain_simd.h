@@ -108,6 +108,8 @@ int chain_simd_init(Chain *c, int requested);
 void chain_simd_free(Chain *c);
 /* ChainState changed outside an evaluation (accepted step, state loaded). */
 void chain_simd_invalidate(Chain *c);
+/* The per-cart masses and moments of the vector path from the model's (they change with the items). */
+void chain_simd_masses(Chain *c);
 /* Fills the scalar scratch from the last vector evaluation (no-op on the
  * scalar path or when done). */
 void chain_simd_sync(Chain *c);

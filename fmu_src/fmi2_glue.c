@@ -391,6 +391,11 @@ static fmi2Status commit(Instance *in, const char *fn, const LSSParams *backup, 
         return fmi2Error;
     }
     if (in->state == ST_STEP_COMPLETE) {
+        if (in->chain && chain_check_inputs(in->chain, &in->p, err, sizeof err)) {
+            in->p = *backup;
+            LOG_ERROR(in, "%s: %s", fn, err);
+            return fmi2Error;
+        }
         chain_set_inputs(in->chain, &in->p);
         in->outputs_stale = 1;
     } else if (v->variability == LSS_FIXED || in->state == ST_INIT || v->causality == LSS_INPUT) {

@@ -44,6 +44,7 @@ class Var:
 
 P, CP, IN, OUT = "parameter", "calculatedParameter", "input", "output"
 N_GROUPS = 8   # motor groups a plant model can drive (drive.n_groups <= N_GROUPS)
+N_LOAD_PORTS = 2   # item ports (an induction and a chute)
 
 FORCE_CHANNELS = [
     "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
@@ -242,6 +243,18 @@ VARIABLES: list[Var] = [
         "the cart whose axle passed the induction station last (changes as the next cart passes)"),
     Var("station.chute.cart", "Integer", OUT, "discrete",
         "the cart whose axle passed the chute last"),
+    *[v for k in range(1, N_LOAD_PORTS + 1) for v in (
+        Var(f"load{k}.cart", "Integer", IN, "discrete",
+            f"item port {k}: the cart it loads (-1: idle); when the port's cart or mass changes, that cart "
+            f"carries load{k}.mass from then on", start=-1, min=-1),
+        Var(f"load{k}.mass", "Real", IN, "discrete",
+            f"item port {k}: the item mass on load{k}.cart (0: none); an item put on arrives with no speed "
+            "(the cart shares its momentum with it), one taken off leaves at the cart's speed",
+            "kg", 0.0, 0.0, 1000.0))],
+    Var("chain.items.mass", "Real", OUT, "discrete", "mass of all items on the carts", "kg"),
+    Var("energy.E_items", "Real", OUT, "continuous",
+        "mechanical energy the item ports changed (the inelastic loss of an item put on a moving cart, "
+        "the items' weight): E_mech - E_items - W_motor + W_damping + W_rolling stays constant", "J"),
 ]
 
 BY_NAME = {v.name: v for v in VARIABLES}

@@ -555,14 +555,15 @@ def test_every_word_of_a_serialized_state():
         slowest = 0.0
         category = "serialized FMU state, every 8-byte word set to NaN, +-inf, 0, -1, 1e300"
         n_carts = s.get("chain.n_carts")
-        hdr = 20   # chain.c, chain_state_save: solver fields and inputs, then the states
-        ny, c0 = 13 * n_carts + 6, len(blob) // 8 - (hdr + 12 + 45 * n_carts)
+        hdr = 25   # chain.c, chain_state_save: solver fields and inputs, then the states
+        ny, c0 = 13 * n_carts + 6, len(blob) // 8 - (hdr + 12 + 46 * n_carts)
 
         def region(w: int) -> str:
             k = w - c0
             return ("header and parameters" if k < 0 else "solver fields and inputs" if k < hdr else
                     "states (positions, orientations, velocities)" if k < hdr + ny else
-                    "contact memory and warm starts" if k < hdr + ny + 19 * n_carts else "FSAL derivative")
+                    "contact memory and warm starts" if k < hdr + ny + 19 * n_carts else
+                    "FSAL derivative" if k < hdr + 2 * ny + 19 * n_carts else "item loads")
         for w in range(len(blob) // 8):
             for v in WORD_VALUES:
                 bad = blob[:8 * w] + struct.pack("=d", v) + blob[8 * w + 8:]

@@ -51,12 +51,12 @@ def test_solver_refuses_a_state_that_cannot_advance(tmp_path):
 
 # --- corrupted solver fields of an FMU state (the issue's cases) -----------------------------------
 
-# chain snapshot after the header: 0 n_y, 1 t, 2 h, 3 error memory, ..., 12-19 the motor groups' thrust
-# (chain.c, chain_state_save)
+# chain snapshot after the header: 0 n_y, 1 t, 2 h, 3 error memory, ..., 12-19 the motor groups' thrust,
+# 20-23 the item ports as applied, 24 the items' energy (chain.c, chain_state_save)
 SOLVER_CASES = [(1, float("nan")), (1, 1e300), (1, -1.0), (1, 0.02), (1, 0.0), (2, 0.0), (2, float("nan")),
                 (2, -1e-3), (2, 1e300), (3, -1.0), (3, 0.0), (3, float("nan")), (7, 1e300), (7, -1.0), (7, 0.5),
-                (11, 0.5), (0, 7.0), (12, 5.0), (19, float("nan"))]
-CHAIN_HEADER = 20   # doubles before the state vector in a chain snapshot
+                (11, 0.5), (0, 7.0), (12, 5.0), (19, float("nan")), (20, 3.0), (23, -2.0), (24, float("inf"))]
+CHAIN_HEADER = 25   # doubles before the state vector in a chain snapshot
 
 
 @pytest.mark.parametrize("word,value", SOLVER_CASES)
@@ -66,7 +66,7 @@ def test_corrupted_solver_fields_are_refused(word, value):
         s.fmu.doStep(0.0, 0.01)
         good = s.fmu.getFMUstate()
         blob = bytes(s.fmu.serializeFMUstate(good))
-        n_chain = CHAIN_HEADER + 12 + 45 * s.get("chain.n_carts")
+        n_chain = CHAIN_HEADER + 12 + 46 * s.get("chain.n_carts")
         at = len(blob) - 8 * n_chain + 8 * word
         bad = blob[:at] + struct.pack("=d", value) + blob[at + 8:]
         buf = ctypes.create_string_buffer(bad, len(bad))

@@ -124,3 +124,114 @@ def test_an_fmu_state_replays_the_external_drive_bit_for_bit(fmu_file):
             s.step(0.01)
             second.append(s.fmu.getReal(vrs))
         assert np.array_equal(first, second)
+
+
+# --- items on carts ---------------------------------------------------------------------------
+
+ITEM_OUT = ["chain.v_mean", "chain.items.mass", "energy.E_mech", "energy.E_items", "energy.W_motor",
+            "energy.W_damping", "energy.W_rolling"]
+
+
+def coasting(layout: str) -> dict:
+    return {"layout.name": layout, "chain.v_init": 1.5, "drive.mode": 1, "wheel.mu_roll": 0.0, "drive.group1.F": 0.0}
+
+
+def at(times: dict):
+    """An on_step that sets the given inputs once the clock reaches each time."""
+    def act(sim, t):
+        for when, values in times.items():
+            if abs(t - when) < 1e-9:
+                for name, value in values.items():
+                    sim.set(name, value)
+    return act
+
+
+@pytest.mark.parametrize("layout, cart, mass", [("layout7", 5, 30.0), ("layout7", 40, 80.0), ("layout1", 100, 50.0)])
+def test_an_item_put_on_a_moving_cart_slows_the_chain_by_momentum(path_sim, layout, cart, mass):
+    """An item arriving with no speed shares the chain's momentum: over the 0.1 s after it (the jolt
+    running along the joints, averaged), the chain runs at M / (M + m) of the speed it has without it,
+    within 0.3 %; taking the item off again changes no speed. (Later the item's weight on a slope
+    moves the ratio: an external force, not the event.)"""
+    ref = path_sim.simulate(0.5, 1 / 300, coasting(layout), outputs=ITEM_OUT)
+    M = path_sim.get("chain.n_carts") * path_sim.get("cart.mass")
+    df = path_sim.simulate(0.5, 1 / 300, coasting(layout), outputs=ITEM_OUT,
+                           on_step=at({0.1: {"load1.cart": cart, "load1.mass": mass},
+                                       0.3: {"load2.cart": cart, "load2.mass": 0.0}}))
+    ratio = (df["chain.v_mean"] / ref["chain.v_mean"]).to_numpy()
+    t = df["time"].to_numpy()
+
+    def mean(a, b):
+        return ratio[(t > a + 1e-9) & (t <= b + 1e-9)].mean()
+    assert ratio[t <= 0.1 + 1e-9].max() == ratio[t <= 0.1 + 1e-9].min() == 1.0
+    assert mean(0.11, 0.2) == pytest.approx(M / (M + mass), rel=0.003)
+    assert mean(0.31, 0.4) == pytest.approx(mean(0.21, 0.3), rel=0.003)
+    assert df["chain.items.mass"][t == t[t <= 0.2].max()].item() == mass and df["chain.items.mass"].iloc[-1] == 0.0
+
+
+def test_the_energy_balance_holds_across_items(sim):
+    """E_mech - E_items - W_motor + W_damping + W_rolling drifts no more with items coming and going on
+    a driven chain than without them (the solver's own drift, about 0.35 J here): E_items is exactly the
+    inelastic loss and the items' weight."""
+    def drift(events):
+        df = sim.simulate(0.8, 1 / 300, {"layout.name": "layout7"}, outputs=ITEM_OUT, on_step=at(events))
+        balance = df["energy.E_mech"] - df["energy.E_items"] - df["energy.W_motor"] + df["energy.W_damping"] + \
+            df["energy.W_rolling"]
+        return float(balance.iloc[-1] - balance.iloc[0]), df
+    plain, _ = drift({})
+    moved, df = drift({0.1: {"load1.cart": 3, "load1.mass": 40.0}, 0.3: {"load1.cart": 20, "load1.mass": 25.0},
+                       0.5: {"load2.cart": 3, "load2.mass": 0.0}})
+    assert np.ptp(df["energy.E_items"]) > 100.0        # J moved by the items
+    assert abs(moved - plain) < 0.05
+    assert df["chain.items.mass"].iloc[-1] == 25.0
+
+
+def test_items_at_the_start_ride_from_the_start(sim):
+    df = sim.simulate(0.2, 0.01, {"layout.name": "layout7", "load1.cart": 7, "load1.mass": 50.0},
+                      outputs=["chain.items.mass", "energy.E_items"])
+    assert df["chain.items.mass"].iloc[0] == 50.0 and df["energy.E_items"].iloc[-1] == 0.0
+
+
+def test_bad_item_input_is_refused_naming_it(fmu_file):
+    with ChainSimulator(fmu_file) as s:
+        with pytest.raises(SimulationError, match=r"load1.cart = 52 is invalid: the chain has 52 carts"):
+            s.start({"layout.name": "layout7", "load1.cart": 52, "load1.mass": 5.0})
+    for name, value in (("load2.mass", 2000.0), ("load2.mass", -1.0), ("load1.mass", float("nan")),
+                        ("load1.cart", -2)):
+        with ChainSimulator(fmu_file) as s:
+            s.start({"layout.name": "layout7"})
+            s.step(0.01)
+            with pytest.raises(SimulationError, match=name.replace(".", r"\.")):
+                s.set(name, value)
+    with ChainSimulator(fmu_file) as s:     # in Step Mode too, and the refused value leaves the chain as it was
+        s.start({"layout.name": "layout7"})
+        s.step(0.01)
+        with pytest.raises(SimulationError, match="load2.cart = 99 is invalid"):
+            s.set("load2.cart", 99)
+        s.step(0.01)
+        assert s.get("chain.items.mass") == 0.0
+
+
+def test_an_fmu_state_keeps_the_items(fmu_file):
+    with ChainSimulator(fmu_file) as s:
+        s.start({"layout.name": "layout7", "load1.cart": 4, "load1.mass": 20.0})
+        vrs = [s.vr(c) for c in ("chain.v_mean", "chain.items.mass", "energy.E_items", "transducer.joint.F_x")]
+        s.step(0.05)
+        s.set("load2.cart", 9)
+        s.set("load2.mass", 35.0)
+        s.step(0.05)
+        state = s.fmu.getFMUstate()
+        blob = s.fmu.serializeFMUstate(state)
+        s.fmu.freeFMUstate(state)
+        t_saved, first = s.time, []
+        for _ in range(10):
+            s.step(0.01)
+            first.append(s.fmu.getReal(vrs))
+        s.set("load2.mass", 0.0)            # after the state was taken: the state puts the item back
+        restored = s.fmu.deSerializeFMUstate(blob)
+        s.fmu.setFMUstate(restored)
+        s.fmu.freeFMUstate(restored)
+        s.time, second = t_saved, []
+        for _ in range(10):
+            s.step(0.01)
+            second.append(s.fmu.getReal(vrs))
+        assert np.array_equal(first, second) and first[-1][1] == 55.0
