@@ -156,6 +156,14 @@ static void set_params(Env *env, fmi2Component c, int k) {
     CALL(fmi2OK, fmi2SetString(c, &vr_s, 1, &layout));
     CALL(fmi2OK, fmi2SetInteger(c, vr_i, 2, ints));
     CALL(fmi2OK, fmi2SetReal(c, vr_r, 3, r));
+    if (k % 3 == 1) {  /* every third cycle: the external drive in groups, an item on a cart from the start */
+        fmi2ValueReference vr_e[3] = {VR_DRIVE_MODE, VR_DRIVE_N_GROUPS, VR_LOAD1_CART};
+        fmi2ValueReference vr_f[3] = {VR_DRIVE_GROUP1_F, VR_DRIVE_GROUP1_F + 1, VR_LOAD1_MASS};
+        fmi2Integer e[3] = {1, 1 + k % 5, k % 40};
+        fmi2Real f[3] = {150.0 + k % 50, 100.0 - k % 30, 10.0 + k % 7};
+        CALL(fmi2OK, fmi2SetInteger(c, vr_e, 3, e));
+        CALL(fmi2OK, fmi2SetReal(c, vr_f, 3, f));
+    }
 }
 
 static void get_outputs(Env *env, fmi2Component c, double *out) {
@@ -186,6 +194,13 @@ static double init_and_run(Env *env, fmi2Component c, const Opts *o, int k, doub
     double t = 0.0;
     for (int i = 1; i <= steps; i++) {
         double tn = i == steps ? o->stop : i * o->h;
+        if (k % 3 == 1 && i == steps / 2) {  /* an item put on a moving cart, another's taken off */
+            fmi2ValueReference vr_c[2] = {VR_LOAD2_CART, VR_LOAD1_CART}, vr_m[2] = {VR_LOAD2_MASS, VR_LOAD1_MASS};
+            fmi2Integer carts[2] = {(k + 5) % 40, k % 40};
+            fmi2Real masses[2] = {25.0, 0.0};
+            CALL(fmi2OK, fmi2SetInteger(c, vr_c, 2, carts));
+            CALL(fmi2OK, fmi2SetReal(c, vr_m, 2, masses));
+        }
         CALL(fmi2OK, fmi2DoStep(c, t, tn - t, fmi2True));
         t = tn;
     }
