@@ -129,6 +129,20 @@ def test_campaign_refuses_bad_input(data, reference, tmp_path):
     (mixed / "m19").rename(mixed / "m20")
     with pytest.raises(CampaignError, match=r"sorter m20: .*mixed/m20: layout 'layout6' differs from"):
         run_campaign([data[0], mixed], ["LW"], tmp_path / "z", settings=SMALL, workers=1, **kw)
+    # records of another protocol beside the start-stops: one campaign compares laws on one kind of record
+    other = tmp_path / "start_up"
+    with ChainSimulator() as s:
+        run_measurement("recovery", 5, other, s, protocol="start-up", lap_seconds=0.3)
+    with pytest.raises(CampaignError, match=r"mix records of different kinds: .*protocol 'start-stop'.*"
+                                            r"protocol 'start-up'"):
+        run_campaign([data[0], other], ["LW"], tmp_path / "k", settings=SMALL, workers=1, **kw)
+    # a measurement missing from one data folder: its sorter would be fitted on fewer records than the others
+    import shutil
+    partial = tmp_path / "partial"
+    shutil.copytree(data[1], partial)
+    shutil.rmtree(partial / "m21")
+    with pytest.raises(CampaignError, match=r"sorter m21 has 1 record\(s\) where others have 2"):
+        run_campaign([data[0], partial], ["LW"], tmp_path / "p", settings=SMALL, workers=1, **kw)
 
 
 def test_sorters_by_folder_name_and_by_manifest(data, tmp_path):

@@ -154,6 +154,23 @@ def _same_run(out: Path, settings: Settings, seed: int) -> None:
                             f"with its seed (give another --out)")
 
 
+def _one_kind(sorters: list, kinds: dict, by_folder: bool) -> None:
+    """A campaign compares contact laws on records of one kind: one set and
+    one protocol throughout, and, with records grouped by folder name across
+    data folders, as many records for every sorter."""
+    if len(kinds) > 1:
+        (a, sa), (b, sb) = list(kinds.items())[:2]
+        raise CampaignError(f"the data mix records of different kinds: {sa.records[0]} is set {a[0]!r}, "
+                            f"protocol {a[1]!r}; {sb.records[0]} is set {b[0]!r}, protocol {b[1]!r}; run them as "
+                            f"separate campaigns")
+    counts = {len(s.records) for s in sorters}
+    if by_folder and len(counts) > 1:
+        most = max(counts)
+        short = next(s for s in sorters if len(s.records) < most)
+        raise CampaignError(f"sorter {short.name} has {len(short.records)} record(s) where others have {most}: "
+                            f"a measurement is missing from a data folder ({', '.join(short.records)} found)")
+
+
 def run_campaign(data_dirs: Sequence[Union[str, Path]], models: Sequence[str], out: Union[str, Path], *,
                  settings: Optional[Settings] = None, manifest: Optional[Union[str, Path]] = None,
                  workers: int = 2, scheduler: Optional[str] = None, client=None, seed: int = 0,
@@ -175,11 +192,16 @@ def run_campaign(data_dirs: Sequence[Union[str, Path]], models: Sequence[str], o
     sorters = sorters_of_manifest(manifest) if manifest is not None else sorters_in(data_dirs)
     if not sorters:
         raise CampaignError("no data folder given")
+    kinds = {}
     for s in sorters:   # refused before anything runs: a task would fail alone, after the pool had started
         try:
-            check_records([load_measurement(p) for p in s.records])
+            records = [load_measurement(p) for p in s.records]
+            check_records(records)
         except RecordsError as exc:
             raise CampaignError(f"sorter {s.name}: {exc}") from None
+        meta = records[0].meta or {}
+        kinds.setdefault((meta.get("set"), records[0].protocol.name), s)
+    _one_kind(sorters, kinds, manifest is None and len(data_dirs) > 1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     _same_run(out, settings, seed)
