@@ -232,14 +232,6 @@ double drive_command(const ChainModel *m, const ChainState *st, double v_mean, d
  * ripple if on. *hint is the cart's motor hint. Returns 0 when no motor is
  * under its plate (then the cart gets no thrust at all). */
 int drive_thrust(const ChainModel *m, const double *F_motor, double s_axle, int *hint, double F_cmd, double *F);
-/* Can a motor push at all (a motor exists, and a command, an external thrust or the ripple is on)? */
-static inline int drive_acts(const ChainModel *m, double F_cmd) {
-    return m->track.n_motors > 0 && (F_cmd != 0.0 || m->fx.ripple_on || m->drive_mode == DRIVE_EXTERNAL);
-}
-/* Each motor's own thrust under the external drive; NULL under the internal one. */
-static inline const double *drive_motors(const Chain *c) {
-    return c->m.drive_mode == DRIVE_EXTERNAL ? c->st.F_motor : NULL;
-}
 /* Per motor group: the thrust on the chain, the coverage-weighted tangential
  * speed of the plates over it and the thrust's power, at the current
  * scratch (outputs only). */

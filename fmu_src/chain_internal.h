@@ -15,6 +15,15 @@ static inline double contact_vi(double remembered, double ddelta, double v_min) 
     return ddelta > v_min ? ddelta : v_min;
 }
 
+/* Can a motor push at all (a motor exists, and a command, an external thrust or the ripple is on)? */
+static inline int drive_acts(const ChainModel *m, double F_cmd) {
+    return m->track.n_motors > 0 && (F_cmd != 0.0 || m->fx.ripple_on || m->drive_mode == DRIVE_EXTERNAL);
+}
+/* Each motor's own thrust under the external drive; NULL under the internal one. */
+static inline const double *drive_motors(const Chain *c) {
+    return c->m.drive_mode == DRIVE_EXTERNAL ? c->st.F_motor : NULL;
+}
+
 /* Smooth sign for rolling resistance: full value above 1 cm/s. */
 static inline double smooth_sign(double v) { return v / sqrt(v * v + 1e-4); }
 

@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 
 def shown(results: list[dict], wanted: Optional[Sequence[str]] = None) -> list[dict]:
     """The results whose figures are drawn: of each law, the measurements
-    named in `wanted` (sorter names, e.g. m20), or by default the one at the
+    named in `wanted` (sorter names, as the result files give them), or by default the one at the
     median of that law's f (the lower middle one for an even count)."""
     out = []
     for model in sorted({r["model"] for r in results}):

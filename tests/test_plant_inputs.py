@@ -22,6 +22,28 @@ def external(layout: str, groups: int, thrust: dict, **extra) -> dict:
             "wheel.mu_roll": 0.0, **{f"drive.group{k}.F": F for k, F in thrust.items()}, **extra}
 
 
+def replay_after(s, vrs: list, steps: int, change) -> tuple:
+    """Takes an FMU state, steps `steps` x 10 ms reading `vrs`, calls change(s) (inputs set after the state
+    was taken), restores the serialized state and steps the same again: (first, second) readings."""
+    state = s.fmu.getFMUstate()
+    blob = s.fmu.serializeFMUstate(state)
+    s.fmu.freeFMUstate(state)
+    t_saved, runs = s.time, []
+    for k in range(2):
+        if k == 1:
+            change(s)
+            restored = s.fmu.deSerializeFMUstate(blob)
+            s.fmu.setFMUstate(restored)
+            s.fmu.freeFMUstate(restored)
+            s.time = t_saved
+        run = []
+        for _ in range(steps):
+            s.step(0.01)
+            run.append(s.fmu.getReal(vrs))
+        runs.append(run)
+    return runs[0], runs[1]
+
+
 def acceleration(df, t0: float = 0.1) -> float:
     """Mean acceleration after the first t0 s (the start's settling) by a straight line through v(t)."""
     keep = df["time"] >= t0
@@ -108,21 +130,8 @@ def test_an_fmu_state_replays_the_external_drive_bit_for_bit(fmu_file):
         vrs = [s.vr(c) for c in ("chain.v_mean", "drive.F_total", "drive.group2.F_total")]
         for _ in range(20):
             s.step(0.01)
-        state = s.fmu.getFMUstate()
-        blob = s.fmu.serializeFMUstate(state)
-        s.fmu.freeFMUstate(state)
-        t_saved, first = s.time, []
-        for _ in range(20):
-            s.step(0.01)
-            first.append(s.fmu.getReal(vrs))
-        s.set("drive.group2.F", 400.0)      # changed after the state was taken: the state restores it
-        restored = s.fmu.deSerializeFMUstate(blob)
-        s.fmu.setFMUstate(restored)
-        s.fmu.freeFMUstate(restored)
-        s.time, second = t_saved, []
-        for _ in range(20):
-            s.step(0.01)
-            second.append(s.fmu.getReal(vrs))
+        # drive.group2.F changed after the state was taken: the state restores it
+        first, second = replay_after(s, vrs, 20, lambda sim: sim.set("drive.group2.F", 400.0))
         assert np.array_equal(first, second)
 
 
@@ -219,19 +228,6 @@ def test_an_fmu_state_keeps_the_items(fmu_file):
         s.set("load2.cart", 9)
         s.set("load2.mass", 35.0)
         s.step(0.05)
-        state = s.fmu.getFMUstate()
-        blob = s.fmu.serializeFMUstate(state)
-        s.fmu.freeFMUstate(state)
-        t_saved, first = s.time, []
-        for _ in range(10):
-            s.step(0.01)
-            first.append(s.fmu.getReal(vrs))
-        s.set("load2.mass", 0.0)            # after the state was taken: the state puts the item back
-        restored = s.fmu.deSerializeFMUstate(blob)
-        s.fmu.setFMUstate(restored)
-        s.fmu.freeFMUstate(restored)
-        s.time, second = t_saved, []
-        for _ in range(10):
-            s.step(0.01)
-            second.append(s.fmu.getReal(vrs))
+        # the item taken off after the state was taken: the state puts it back
+        first, second = replay_after(s, vrs, 10, lambda sim: sim.set("load2.mass", 0.0))
         assert np.array_equal(first, second) and first[-1][1] == 55.0

@@ -1,5 +1,6 @@
 /* What the two plant FMUs of examples/plant share: the FMI 2.0 functions
- * neither supports, answered with fmi2Error, and the logging helper. Each
+ * neither supports, answered with fmi2Error, the ones with nothing to do,
+ * and the logging helper. Each
  * FMU defines its own instance type and the functions it supports. */
 #ifndef PLANT_FMU_COMMON_H
 #define PLANT_FMU_COMMON_H
@@ -46,6 +47,14 @@ UNSUPPORTED(fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKin
 UNSUPPORTED(fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *v))
 UNSUPPORTED(fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *v))
 #pragma GCC diagnostic warning "-Wunused-parameter"
+
+/* Nothing to do in either FMU: logging categories are not filtered, initialisation and termination keep no resources. */
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) {
+    (void)on; (void)n; (void)cat;
+    return c ? fmi2OK : fmi2Error;
+}
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
+fmi2Status fmi2Terminate(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }

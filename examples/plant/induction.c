@@ -66,11 +66,6 @@ void fmi2FreeInstance(fmi2Component c) {
     if (d) d->cb.freeMemory(d);
 }
 
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cat[]) {
-    (void)c; (void)on; (void)n; (void)cat;
-    return fmi2OK;
-}
-
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean td, fmi2Real tol, fmi2Real start, fmi2Boolean sd,
                                fmi2Real stop) {
     (void)td; (void)tol; (void)sd; (void)stop;
@@ -79,8 +74,6 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean td, fmi2Real tol, fm
     d->time = start;
     return fmi2OK;
 }
-
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     Induction *d = c;
@@ -93,8 +86,6 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     d->initialised = 1;
     return fmi2OK;
 }
-
-fmi2Status fmi2Terminate(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
 
 fmi2Status fmi2Reset(fmi2Component c) {
     Induction *d = c;
