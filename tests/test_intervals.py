@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.objective.uncertainty import IDENTIFIABLE_WIDTH, Z95, intervals
+from identification.objective.jacobian import jacobian
+from identification.objective.uncertainty import IDENTIFIABLE_WIDTH, ROUGH, Z95, intervals
 
 
 class _Line:
@@ -48,3 +49,49 @@ def test_a_value_at_a_bound_is_claimed_by_the_record_width_not_the_clipped_one(s
     assert at_bound.upper == 1.0 and at_bound.upper - at_bound.lower < 0.6 * (inside.upper - inside.lower)
     claim = share <= IDENTIFIABLE_WIDTH
     assert inside.identifiable is claim and at_bound.identifiable is claim, (share, inside, at_bound)
+
+
+class _Bent(_Line):
+    """`_Line` with a response in `a` that bends (c (a - a_mid)^2 along a third
+    pattern) or, with `chaos`, one that jumps at every scale (a pattern drawn
+    afresh for every value of a), as a chaotic record's forces do."""
+
+    def __init__(self, c: float = 0.0, chaos: float = 0.0, **kw):
+        self.c, self.chaos = c, chaos
+        rng = np.random.default_rng(11)
+        self.k = rng.normal(size=(300, 7))
+        super().__init__(1.0, [(0.0, 1.0), (0.0, 1.0)], **kw)
+
+    def simulate(self, x):
+        a, b = np.asarray(x, float)
+        bend = self.c * (a - 0.5) ** 2 * self.k
+        if self.chaos:
+            bend = bend + self.chaos * np.random.default_rng(np.float64(a).view(np.uint64)).normal(size=self.k.shape)
+        return a * self.g + b * self.h + bend
+
+
+def _rough_of_a(p, recheck=None) -> float:
+    sim0 = p.simulate(p.truth)
+    w = 1.0 / np.mean((p.samples - sim0) ** 2, axis=0)
+    return float(jacobian(p, p.truth, sim0, weights=w, recheck=recheck)[2][0])
+
+
+def test_a_response_that_bends_is_smooth_at_half_the_step():
+    """A curved response parts its forward and backward differences in
+    proportion to the step: rough at the first step, smooth at half of it, so
+    the variable is claimed with its interval."""
+    probe = _rough_of_a(_Bent(c=1.0))
+    p = _Bent(c=1.2 / probe)                 # rough 1.2 at the first step: past ROUGH
+    assert _rough_of_a(p) >= ROUGH
+    assert _rough_of_a(p, recheck=ROUGH) < ROUGH
+    a = {iv.name: iv for iv in intervals(p, p.truth)}["a"]
+    assert a.smooth and a.identifiable and a.lower <= p.truth[0] <= a.upper, a
+
+
+def test_a_chaotic_response_stays_rough_at_half_the_step():
+    """Differences that jump at every scale do not come together at half the
+    step: not smooth, not claimed."""
+    p = _Bent(chaos=0.5)
+    assert _rough_of_a(p, recheck=ROUGH) >= ROUGH
+    a = {iv.name: iv for iv in intervals(p, p.truth)}["a"]
+    assert not a.smooth and not a.identifiable, a

@@ -30,7 +30,8 @@ MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound
 
 def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
              rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
-             steps: Optional[np.ndarray] = None, guess: Optional[np.ndarray] = None) -> tuple:
+             steps: Optional[np.ndarray] = None, guess: Optional[np.ndarray] = None,
+             recheck: Optional[float] = None) -> tuple:
     """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
     each column): central differences inside the bounds, one-sided at a bound;
     the roughness is |forward - backward| / |their mean| in the metric
@@ -44,7 +45,9 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     nonlinearity of a variable the record pins to a thousandth of its range,
     such as the pretension). `guess`: first steps to scale from instead of
     `rel_step` of the range (the steps of a neighbouring window: most need
-    no rescaling there).
+    no rescaling there). `recheck`: a column at least this rough is measured
+    again at half its step (2 simulations more), which tells the curvature
+    of a smooth response (the disagreement halves) from chaos (it stays).
 
     The simulations run in rounds (each column's first step, its rescaled
     steps, its second step), side by side on the problem's pool when it has
@@ -97,20 +100,40 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
                 del y1[k]
             y1.update(run(again))
     central = {k for k in y1 if sgn[k] > 0 and x[k] - h[k] >= lo[k]}
-    y2 = run({k: at(k, -h[k]) if k in central else at(k, 2 * sgn[k] * h[k]) for k in sorted(y1)})
-    for k in sorted(y2):
+
+    def second(ks, hs):
+        """The second point of each column k: backward, or a second step inwards at a bound."""
+        return run({k: at(k, -hs[k]) if k in central else at(k, 2 * sgn[k] * hs[k]) for k in ks})
+
+    def column(k, hk, ya, yb):
+        """(column, roughness) of variable k from its two points at step hk."""
         if k in central:
-            fwd, bwd = (y1[k] - sim0) / h[k], (sim0 - y2[k]) / h[k]
-            J[:, :, k] = 0.5 * (fwd + bwd)
-            m = norm(J[:, :, k])
-            rough[k] = norm(fwd - bwd) / m if m > 0 else np.inf
-        else:  # at a bound: two steps inwards, their differences compared
-            d1 = sgn[k] * (y1[k] - sim0) / h[k]
-            d2 = sgn[k] * (y2[k] - y1[k]) / h[k]
-            J[:, :, k] = d1
-            m = norm(0.5 * (d1 + d2))
-            rough[k] = norm(d1 - d2) / m if m > 0 else np.inf
+            fwd, bwd = (ya - sim0) / hk, (sim0 - yb) / hk
+            col = 0.5 * (fwd + bwd)
+            m = norm(col)
+            return col, (norm(fwd - bwd) / m if m > 0 else np.inf)
+        d1 = sgn[k] * (ya - sim0) / hk     # at a bound: two steps inwards, their differences compared
+        d2 = sgn[k] * (yb - ya) / hk
+        m = norm(0.5 * (d1 + d2))
+        return d1, (norm(d1 - d2) / m if m > 0 else np.inf)
+
+    y2 = second(sorted(y1), h)
+    for k in sorted(y2):
+        J[:, :, k], rough[k] = column(k, h[k], y1[k], y2[k])
         used[k] = h[k]
+    if recheck is not None:
+        # a smooth simulation's forward and backward differences part by its curvature, in proportion
+        # to the step; a chaotic one's do not come together: a rough column is measured again at half
+        # the step and keeps what it shows there
+        again = [k for k in sorted(y2) if np.isfinite(rough[k]) and rough[k] >= recheck]
+        half = {k: 0.5 * h[k] for k in again}
+        ya = run({k: at(k, sgn[k] * half[k]) for k in again})
+        yb = second(sorted(ya), half)
+        for k in sorted(yb):
+            J[:, :, k], rough[k] = column(k, half[k], ya[k], yb[k])
+            used[k] = half[k]
+            log.debug("jacobian column %s measured again at half the step: roughness %.3g",
+                      problem.free[k], rough[k])
     return J, used, rough
 
 

@@ -17,9 +17,12 @@ record's, not the bounds': a value at a bound with a wide interval is not
 claimed because half of that interval lies beyond the bound. Nor is a
 variable in which the simulation is not smooth: where the forward and the
 backward difference disagree (ROUGH of their mean or more, in the
-objective's metric) the record is chaotic in that variable (steady
-running, docs/identification.md), the linearisation means nothing, and no
-interval is claimed.
+objective's metric) at the step and again at half of it, the record is
+chaotic in that variable (steady running, docs/identification.md), the
+linearisation means nothing, and no interval is claimed. Half the step
+tells the two apart: a smooth response's differences part by its
+curvature, in proportion to the step (strong near a CoR's lower bound, where
+the damping grows fast), a chaotic one's stay apart.
 """
 from __future__ import annotations
 
@@ -100,7 +103,7 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
     sim0 = problem.simulate(x) if sim is None else np.asarray(sim, float)
     r = tared(problem.samples - sim0, problem.tare)
     sigma2 = np.maximum(np.mean(r ** 2, axis=0), 1e-30)
-    J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2)
+    J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2, recheck=ROUGH)
     if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
         demean = np.abs((problem.samples - sim0).mean(axis=0)) <= problem.tare
         J[:, demean, :] -= J[:, demean, :].mean(axis=0)
