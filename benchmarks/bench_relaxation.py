@@ -2,11 +2,14 @@
 """What a start from rest costs and how settled it is: the chain's relaxation
 at rest (chain.relax_time, fmu_src/chain_relax.c) per layout.
 
-For each layout the chain at rest (trigger point 10 m) is relaxed for k times
-its protocol relax time T (lss_fmu.protocol.Protocol.relax_time) and the
-transducer's seven forces read at the end: the CPU of the start, and the
-largest change of a force against the longest relaxation (how far the
-relaxation of length T is from settled). Then the relaxation of length T at
+For each layout the chain at rest is relaxed for its protocol relax time T
+(lss_fmu.protocol.Protocol.relax_time) at three places on its track (10 m,
+0.37 and 0.71 of its length) and then left at rest, the drive holding it, for
+DRIFT_S: the CPU of the start, and the largest change of the transducer's
+seven forces over that time (a settled chain does not move). Then whether
+the start is a smooth function of where the chain stands: the forces at
+t = 0 for trigger points SMOOTH_STEP apart, their largest second difference
+against their largest first difference. Then the relaxation of length T at
 two run tolerances (the relaxation runs at ten times the run's, at most
 1e-3): whether its steps are bounded by the tolerance.
 
@@ -32,41 +35,57 @@ from lss_fmu.protocol import TRANSIENT_TOLERANCE, Protocol  # noqa: E402
 from lss_fmu.runner import ChainSimulator  # noqa: E402
 from lss_fmu.variables import FORCE_CHANNELS  # noqa: E402
 
-LAYOUTS = ("layout7", "layout1", "layout3")
-FACTORS = (0.5, 1.0, 2.0, 3.5)     # relax times, in units of T (the FMU allows up to 10 s)
-S_START = 10.0                     # m: where the chain stands on its track
+LAYOUTS = ("layout1", "layout2", "layout3", "layout4", "layout5", "layout6", "layout7")
+PLACES = (None, 0.37, 0.71)        # where the chain stands: 10 m, then these shares of the track
+DRIFT_S = 0.5                      # s left at rest after the start
+SMOOTH_STEP = 5e-4                 # m between the trigger points of the smoothness scan (17 points)
 
 
-def start(sim: ChainSimulator, layout: str, relax: float, tolerance: float) -> tuple:
+def start(sim: ChainSimulator, layout: str, relax: float, tolerance: float, s_start: float) -> tuple:
     """(CPU-s of the start, the transducer's forces after it)."""
     c = time.process_time()
-    sim.start({"layout.name": layout, "chain.v_init": 0.0, "chain.relax_time": relax, "chain.s_start": S_START,
+    sim.start({"layout.name": layout, "chain.v_init": 0.0, "chain.relax_time": relax, "chain.s_start": s_start,
                "drive.v_ref": 0.0}, tolerance=tolerance)
     return time.process_time() - c, np.array([sim.get(n) for n in FORCE_CHANNELS])
 
 
+def drift(sim: ChainSimulator) -> float:
+    """The largest change of a transducer force, N, while the chain stays at rest for DRIFT_S."""
+    F0, worst = np.array([sim.get(n) for n in FORCE_CHANNELS]), 0.0
+    for _ in range(int(round(DRIFT_S * 300))):
+        sim.step(1.0 / 300.0)
+        worst = max(worst, float(np.max(np.abs(np.array([sim.get(n) for n in FORCE_CHANNELS]) - F0))))
+    return worst
+
+
 def measure(layout: str) -> dict:
     track = load_track(layout)
-    T = Protocol(name="start-stop").relax_time(float(track.length))
+    L = float(track.length)
+    T = Protocol(name="start-stop").relax_time(L)
     with ChainSimulator() as sim:
-        runs = {k: start(sim, layout, min(k * T, 10.0), TRANSIENT_TOLERANCE) for k in FACTORS}
-        ref = runs[FACTORS[-1]][1]
-        tol = {t: start(sim, layout, T, t)[0] for t in (1e-4, 1e-3)}
-    return {"layout": layout, "carts": int(track.n_carts),
-            "length_m": float(track.length), "relax_s": T,
-            "runs": [{"factor": k, "relax_s": min(k * T, 10.0), "cpu_s": cpu,
-                      "max_force_change_N": float(np.max(np.abs(F - ref)))} for k, (cpu, F) in runs.items()],
+        places = []
+        for share in PLACES:
+            s = 10.0 if share is None else share * L
+            c, _ = start(sim, layout, T, TRANSIENT_TOLERANCE, s)
+            places.append({"s_start": s, "cpu_s": c, "drift_N": drift(sim)})
+        F = np.array([start(sim, layout, T, TRANSIENT_TOLERANCE, 10.0 + k * SMOOTH_STEP)[1] for k in range(17)])
+        tol = {t: start(sim, layout, T, t, 10.0)[0] for t in (1e-4, 1e-3)}
+    d1, d2 = np.abs(np.diff(F, axis=0)).max(), np.abs(np.diff(F, 2, axis=0)).max()
+    return {"layout": layout, "carts": int(track.n_carts), "length_m": L, "relax_s": T, "places": places,
+            "smooth": {"step_m": SMOOTH_STEP, "first_difference_N": float(d1), "second_difference_N": float(d2)},
             "cpu_by_tolerance": {f"{t:g}": v for t, v in tol.items()}}
 
 
 def table(data: dict) -> str:
     lines = [f"| layout | track, m | T, s | CPU-s of a start at T (run tolerance {data['tolerance']:g}) "
-             f"| largest force change against {FACTORS[-1]:g} T, N: " + ", ".join(f"{k:g} T" for k in FACTORS[:-1])
-             + " | CPU-s at T, run tolerance 1e-4 / 1e-3 (the relaxation at 1e-3) |", "|---|---|---|---|---|---|"]
+             f"| drift at rest over {DRIFT_S:g} s after it, N (3 places) "
+             f"| forces at t = 0, {SMOOTH_STEP * 1e3:g} mm apart: largest 1st / 2nd difference, N "
+             "| CPU-s at T, run tolerance 1e-4 / 1e-3 (the relaxation at 1e-3) |", "|---|---|---|---|---|---|---|"]
     for r in data["rows"]:
-        at = {x["factor"]: x for x in r["runs"]}
-        lines.append(f"| {r['layout']} | {r['length_m']:.0f} | {r['relax_s']:.2f} | {at[1.0]['cpu_s']:.2f} | "
-                     + ", ".join(f"{at[k]['max_force_change_N']:.1f}" for k in FACTORS[:-1])
+        cpu = np.mean([p["cpu_s"] for p in r["places"]])
+        lines.append(f"| {r['layout']} | {r['length_m']:.0f} | {r['relax_s']:.2f} | {cpu:.2f} | "
+                     + ", ".join(f"{p['drift_N']:.1f}" for p in r["places"])
+                     + f" | {r['smooth']['first_difference_N']:.3f} / {r['smooth']['second_difference_N']:.3f}"
                      + f" | {r['cpu_by_tolerance']['0.0001']:.2f} / {r['cpu_by_tolerance']['0.001']:.2f} |")
     return "\n".join(lines)
 
@@ -85,8 +104,8 @@ def main(argv=None) -> int:
     rows = []
     for layout in args.layouts.split(","):
         rows.append(measure(layout.strip()))
-        at_T = next(r for r in rows[-1]["runs"] if r["factor"] == 1.0)
-        print(f"{layout}: {at_T['cpu_s']:.2f} CPU-s at T = {rows[-1]['relax_s']:.2f} s", file=sys.stderr)
+        print(f"{layout}: drift {[round(p['drift_N'], 1) for p in rows[-1]['places']]} N after "
+              f"T = {rows[-1]['relax_s']:.2f} s", file=sys.stderr)
     data = {"command": " ".join(sys.argv), "machine": machine(), "tolerance": TRANSIENT_TOLERANCE, "rows": rows}
     if args.json:
         write_json_atomic(args.json, data)

@@ -182,7 +182,7 @@ int chain_check_inputs(const Chain *c, const LSSParams *p, char *err, size_t err
 void chain_masses(Chain *c);
 
 /* Static equilibrium of a chain at rest: relaxes it for T s (drive off,
- * kinetic damping, fixed contact damping so that the result does not depend
+ * viscous damping on a fixed schedule, fixed contact damping so that the result does not depend
  * on the CoRs), then starts the clock at 0 at rest. 0, or 1 with a message. */
 int chain_relax(Chain *c, double T, char *err, size_t errlen);
 

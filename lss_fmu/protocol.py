@@ -43,6 +43,7 @@ NAMES = ("steady", "start-up", "speed-step", "stop", "start-stop")
 FROM_REST = ("start-up", "start-stop")
 WITH_STEP = ("speed-step", "stop", "start-stop")
 RUN_IN = 4.0                 # s: steady running before the photocell is armed (the rig's default)
+RELAX_MIN = 1.0     # s, the shortest relaxation at rest (ten decay times of its viscous damping)
 V_MAX = float(BY_NAME["drive.v_ref"].max)   # the drive's set-point range, m/s
 TRANSIENT_TOLERANCE = 1e-5   # solver tolerance for identifying a transient record: the solver's error
                              # moves the fitted e_JA, e_SW and e_RW by < 1e-4 (linearised), for 0.75 of the
@@ -99,10 +100,11 @@ class Protocol:
 
     def relax_time(self, track_length: float) -> float:
         """How long the chain at rest relaxes into its equilibrium before a
-        start-up (chain.relax_time): the slow axial modes of the loop need
-        longer on a long track (measured: 0.5 s leaves < 2 N on layout 7's 65 m,
-        2.5 s about 5 N on layout 3's 858 m)."""
-        return round(0.5 + float(track_length) / 400.0, 3) if self.from_rest else 0.0
+        start-up (chain.relax_time): at least RELAX_MIN, for the viscous
+        relaxation to damp the loop's slowest modes, and longer on a long
+        track, whose axial modes are slower (after it, the forces of a chain
+        left at rest drift by under 3 N on layouts 1-7: docs/benchmarks.md)."""
+        return round(max(RELAX_MIN, 0.5 + float(track_length) / 400.0), 3) if self.from_rest else 0.0
 
     # -- meta.json ---------------------------------------------------------------------
     def to_meta(self) -> dict:

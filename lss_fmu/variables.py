@@ -199,7 +199,7 @@ VARIABLES: list[Var] = [
         "m", 0.0, 0.0, 1e6),
     Var("chain.relax_time", "Real", P, "fixed",
         "a chain that starts at rest (initial speed 0) first relaxes into its static equilibrium for this "
-        "long (drive off, kinetic damping), before t = 0; 0: it starts as assembled",
+        "long (drive off, viscous damping), before t = 0; 0: it starts as assembled",
         "s", 0.0, 0.0, 10.0),
     # --- issue 19: the vectorised right-hand side and the 8th-order pair ------------------
     Var("solver.vector_path", "Integer", P, "fixed",

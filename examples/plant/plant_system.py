@@ -84,10 +84,11 @@ def parameters(layout: str = "demo", v_set: float = 1.5, rate: float = 2.0, mass
     outside in two motor groups; the induction at 5 m, the chute `chute_after` m further. layout.name
     is given only when it is not the FMU's default (fmpy's SSP master sets no String parameter)."""
     from lss_fmu.layouts import load_track
+    from lss_fmu.protocol import Protocol
     from lss_fmu.variables import BY_NAME
     length = load_track(layout).length
     chain = {"drive.mode": 1, "drive.n_groups": 2, "chain.v_init": 0.0,
-             "chain.relax_time": round(0.5 + length / 400.0, 3), "station.induction.s": 5.0,
+             "chain.relax_time": Protocol(name="start-up").relax_time(length), "station.induction.s": 5.0,
              "station.chute.s": round((5.0 + chute_after) % length, 3)}
     if layout != BY_NAME["layout.name"].start:
         chain = {"layout.name": layout, **chain}
