@@ -14,7 +14,12 @@ two run tolerances (the relaxation runs at ten times the run's, at most
 1e-3): whether its steps are bounded by the tolerance.
 
     .venv/bin/python benchmarks/bench_relaxation.py --json benchmarks/results/relaxation.json
-    .venv/bin/python benchmarks/bench_relaxation.py --doc --json benchmarks/results/relaxation.json
+    .venv/bin/python benchmarks/bench_relaxation.py --doc --json benchmarks/results/relaxation_kinetic.json \
+        benchmarks/results/relaxation.json
+
+`--label` names the relaxation the FMU was built with (a row label of the
+table); the kinetic-damping file was measured on the build before the
+viscous relaxation, with this script.
 """
 from __future__ import annotations
 
@@ -76,14 +81,15 @@ def measure(layout: str) -> dict:
             "cpu_by_tolerance": {f"{t:g}": v for t, v in tol.items()}}
 
 
-def table(data: dict) -> str:
-    lines = [f"| layout | track, m | T, s | CPU-s of a start at T (run tolerance {data['tolerance']:g}) "
+def table(files: list) -> str:
+    data = files[0]
+    lines = [f"| relaxation | layout | track, m | T, s | CPU-s of a start at T (run tolerance {data['tolerance']:g}) "
              f"| drift at rest over {DRIFT_S:g} s after it, N (3 places) "
              f"| forces at t = 0, {SMOOTH_STEP * 1e3:g} mm apart: largest 1st / 2nd difference, N "
-             "| CPU-s at T, run tolerance 1e-4 / 1e-3 (the relaxation at 1e-3) |", "|---|---|---|---|---|---|---|"]
-    for r in data["rows"]:
+             "| CPU-s at T, run tolerance 1e-4 / 1e-3 (the relaxation at 1e-3) |", "|---|---|---|---|---|---|---|---|"]
+    for r, label in [(r, d.get("label", "")) for d in files for r in d["rows"]]:
         cpu = np.mean([p["cpu_s"] for p in r["places"]])
-        lines.append(f"| {r['layout']} | {r['length_m']:.0f} | {r['relax_s']:.2f} | {cpu:.2f} | "
+        lines.append(f"| {label} | {r['layout']} | {r['length_m']:.0f} | {r['relax_s']:.2f} | {cpu:.2f} | "
                      + ", ".join(f"{p['drift_N']:.1f}" for p in r["places"])
                      + f" | {r['smooth']['first_difference_N']:.3f} / {r['smooth']['second_difference_N']:.3f}"
                      + f" | {r['cpu_by_tolerance']['0.0001']:.2f} / {r['cpu_by_tolerance']['0.001']:.2f} |")
@@ -93,23 +99,26 @@ def table(data: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--layouts", default=",".join(LAYOUTS))
-    ap.add_argument("--json", default=None)
+    ap.add_argument("--json", nargs="+", default=None, help="the result file (with --doc: one or more)")
+    ap.add_argument("--label", default="viscous, fixed schedule", help="the relaxation the FMU was built with")
     ap.add_argument("--doc", action="store_true", help="write the table of --json into docs/benchmarks.md and stop")
     args = ap.parse_args(argv)
     if args.doc:
         if not args.json:
             raise SystemExit("--doc needs --json FILE")
-        write_between(ROOT / "docs" / "benchmarks.md", "relaxation", table(json.loads(Path(args.json).read_text())))
+        write_between(ROOT / "docs" / "benchmarks.md", "relaxation",
+                      table([json.loads(Path(f).read_text()) for f in args.json]))
         return 0
     rows = []
     for layout in args.layouts.split(","):
         rows.append(measure(layout.strip()))
         print(f"{layout}: drift {[round(p['drift_N'], 1) for p in rows[-1]['places']]} N after "
               f"T = {rows[-1]['relax_s']:.2f} s", file=sys.stderr)
-    data = {"command": " ".join(sys.argv), "machine": machine(), "tolerance": TRANSIENT_TOLERANCE, "rows": rows}
+    data = {"command": " ".join(sys.argv), "machine": machine(), "tolerance": TRANSIENT_TOLERANCE,
+            "label": args.label, "rows": rows}
     if args.json:
-        write_json_atomic(args.json, data)
-    print(table(data))
+        write_json_atomic(args.json[0], data)
+    print(table([data]))
     return 0
 
 
