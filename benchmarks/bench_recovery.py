@@ -183,7 +183,8 @@ def main(argv=None) -> int:
     old = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
     if old and old.get("settings") != settings.to_dict():
         raise SystemExit(f"{args.json}: holds rows of other settings; give another --json")
-    rows = {q["number"]: q for q in old.get("rows", []) if q["number"] not in numbers}
+    # and so do this run's rows made by this code (finished already: the campaign does not run them again)
+    rows = {q["number"]: q for q in old.get("rows", []) if q["number"] not in numbers or q.get("code") == stamp}
 
     def write() -> None:
         ordered = sorted(rows.values(), key=lambda q: q["number"] or 0)
