@@ -1,6 +1,6 @@
 /* One cart as a free rigid body: kinematics of its points, its place on the
  * track, and the Newton-Euler equations. */
-#include "chain_internal.h"
+#include "rhs_shared.h"
 
 double cart_kinematics(Chain *c, const double *y, int i, CartLocal *L) {
     const ChainModel *m = &c->m;

@@ -3,7 +3,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 #include "chain_simd.h"
 #include "params.h"
 

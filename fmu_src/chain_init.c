@@ -13,7 +13,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 
 typedef struct {
     const Track *track;

@@ -19,7 +19,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 #include "chain_simd.h"
 
 #define RELAX_INTERVAL 0.001    /* s of free motion between two applications of the damping */

@@ -39,7 +39,7 @@
 #ifndef LSS_CHAIN_SIMD_H
 #define LSS_CHAIN_SIMD_H
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 
 /* The vector paths are compiled where GCC (7 or later: its target pragmas,
  * vector extensions and <cpuid.h>) targets x86-64; elsewhere (clang, icc,

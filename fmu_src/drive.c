@@ -6,7 +6,7 @@
  * controller asks; its work is motor work like the thrust's. */
 #include <math.h>
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 
 static double overlap(double a0, double a1, double b0, double b1) {
     double lo = a0 > b0 ? a0 : b0, hi = a1 < b1 ? a1 : b1;

@@ -6,7 +6,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 #include "effects.h"
 
 /* The sensor parameters in the order of the force channels. */

@@ -8,7 +8,7 @@
  * are reduced by the gap before the contact law sees them. The potential is
  * then K (delta - gap)^(n+1)/(n+1) of the same coordinates, so the forces
  * and the frame torque keep their form and the joint stays conservative. */
-#include "chain_internal.h"
+#include "rhs_shared.h"
 
 void joint_forces(Chain *c, const double *y, int j, double *p_damp) {
     const ChainModel *m = &c->m;

@@ -30,7 +30,7 @@
  * a tangential part -F_n (dh/ds ds/dx_t + dr/dx), the slope of the bump or of
  * the wheel, applied through the wheel centre (a round wheel's normal passes
  * through it), so the contact stays conservative. */
-#include "chain_internal.h"
+#include "rhs_shared.h"
 
 #if defined(__GNUC__)
 #define ALWAYS_INLINE inline __attribute__((always_inline))

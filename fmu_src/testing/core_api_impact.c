@@ -3,7 +3,7 @@
  * degree of freedom (indentation d, closing rate d').
  *
  * It uses the chain's own pieces: the Dormand-Prince solver of dopri5.c,
- * contact_force() of contact.h, contact_vi() of chain_internal.h (the onset
+ * contact_force() of contact.h, contact_vi() of rhs_shared.h (the onset
  * velocity in force), and the onset-memory rule of chain_step.c (after each
  * accepted step: a contact found closed that has no onset velocity yet gets
  * the closing rate interpolated linearly at the crossing of d = 0 within the
@@ -18,7 +18,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "chain_internal.h"
+#include "rhs_shared.h"
 #include "contact.h"
 #include "core_api.h"
 #include "dopri5.h"
