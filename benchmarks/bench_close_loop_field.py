@@ -26,6 +26,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from identification.loop.close_loop import close_loop  # noqa: E402
+from identification.loop.settings import LoopSettings  # noqa: E402
 from lss_app.close_loop_report import write_report  # noqa: E402
 from identification.objective.problem import from_measurement  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
@@ -63,7 +64,8 @@ def main(argv=None) -> int:
             meas = load_measurement(folder)
             problem = from_measurement(meas, args.model, window=args.window, tare=True)
             t0 = time.time()
-            r = close_loop(problem, rounds=args.rounds, base_evals=args.base_evals, max_evals=args.max_evals,
+            r = close_loop(problem, rounds=args.rounds,
+                           settings=LoopSettings(base_evals=args.base_evals, max_evals=args.max_evals),
                            seed=0, out=out, workers=args.workers,
                            sensor_offset_std=(meas.meta.get("sensor") or {}).get("force_offset_std_N"))
             res = {**r.to_dict(), "wall_s": time.time() - t0}

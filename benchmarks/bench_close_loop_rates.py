@@ -60,7 +60,7 @@ WORK = ROOT / "build" / "bench_close_loop_rates"
 SUMMARY = ROOT / "benchmarks" / "results" / "close_loop_rates.json"
 
 # the loop's budgets for the benchmark (small: records of 1 s)
-BUDGET = dict(base_evals=80, max_evals=100, fit_evals=20, refine_evals=40, base_refine_evals=60, test_max=4, rounds=1,
+BUDGET = dict(base_evals=80, max_evals=100, fit_evals=20, refine_evals=40, base_refine_evals=60, candidates=4, rounds=1,
               first_window=0.3)   # s, the base's first window (identification.pipeline.growing); 0: the whole record
 CARTS = (0, 7, 13, 20, 26, 33, 39, 46)   # transducer carts of the release transient: in curves and on straights
 
@@ -209,12 +209,14 @@ def rig_problem(case: dict):
 
 def run_case(case: dict, budget: dict = BUDGET) -> dict:
     from identification.loop.close_loop import close_loop
+    from identification.loop.settings import LoopSettings
     t0, c0 = time.time(), time.process_time()
     if case.get("source") == "rig":
         problem, truth, kw = rig_problem(case)
     else:
         problem, truth, kw = synthetic_problem(case)
-    res = close_loop(problem, seed=0, **budget, **kw)
+    settings = {k: v for k, v in budget.items() if k != "rounds"}   # the rest are LoopSettings' fields
+    res = close_loop(problem, seed=0, rounds=budget.get("rounds", 1), settings=LoopSettings(**settings), **kw)
     rounds = []
     for r in res.rounds:
         ev = r.evidence
@@ -264,7 +266,7 @@ def _commit() -> str:
 
 
 def parse_budget(text: str) -> dict:
-    """BUDGET with 'key=int,...' on top (a comparison of budgets; keys as close_loop's)."""
+    """BUDGET with 'key=int,...' on top (a comparison of budgets; keys: `rounds` and LoopSettings' fields)."""
     out = dict(BUDGET)
     for item in filter(None, (text or "").split(",")):
         key, _, val = item.partition("=")

@@ -75,7 +75,7 @@ CASES = {
     "loop_clean": dict(kind="loop", seed=3, transducer=20, params={}),
     "loop_mass": dict(kind="loop", seed=146954997, transducer=7,
                       params={"effects.mass.transducer_factor": 1.25},
-                      extra=dict(fit_evals=20, base_refine_evals=60, test_max=4)),
+                      extra=dict(fit_evals=20, base_refine_evals=60, candidates=4)),
 }
 LOOP_BUDGET = dict(base_evals=80, max_evals=100, refine_evals=40)
 
@@ -152,10 +152,11 @@ def run_pointwise(case: dict, path: int) -> dict:
 
 def run_loop(case: dict, path: int) -> dict:
     from identification.loop.close_loop import close_loop
+    from identification.loop.settings import LoopSettings
     from identification.loop.synthetic import effect_case
     problem, _ = effect_case([], case["seed"], params=dict(case["params"]), transducer=case["transducer"])
     problem.fixed["solver.vector_path"] = path
-    res = close_loop(problem, rounds=1, seed=0, **LOOP_BUDGET, **case.get("extra", {}))
+    res = close_loop(problem, rounds=1, seed=0, settings=LoopSettings(**LOOP_BUDGET, **case.get("extra", {})))
     rnd = res.rounds[0]
     return {"found": res.found, "outcome": res.outcome,
             "amplitude": float(rnd.amplitude) if rnd.confirmed else None,

@@ -88,7 +88,7 @@ def run(args) -> int:
                      progress=not args.no_progress, workers=args.workers,
                      sensor_offset_std=sensor.get("force_offset_std_N"),
                      noise_std=sensor.get("force_noise_std_N") if args.noise == "declared" else None,
-                     **loop_settings.budget())
+                     settings=loop_settings)
     write_json_atomic(out / "result.json", {**res.to_dict(), "settings": {"identify": settings.to_dict(),
                                                                           "close_loop": loop_settings.to_dict()}})
     report = write_report(res, out)

@@ -35,6 +35,7 @@ OOC, OOC_SEED = "crosstalk", 5
 def run_close_loop_stage(out: Path) -> list[str]:
     from identification.loop.catalogue import CATALOGUE
     from identification.loop.close_loop import close_loop
+    from identification.loop.settings import LoopSettings
     from identification.loop.synthetic import effect_case
 
     from .close_loop_report import write_report
@@ -45,8 +46,8 @@ def run_close_loop_stage(out: Path) -> list[str]:
         old.unlink()  # a demo starts afresh, journals included
     print(f"[4] closing the loop: layout 7 with an undeclared effect (drawn from seed {SEED}) ...", flush=True)
     problem, truth = effect_case([EFFECT], SEED)
-    res = close_loop(problem, rounds=1, base_evals=BASE_EVALS, max_evals=EXT_EVALS, seed=0, out=work,
-                     progress=True)
+    res = close_loop(problem, rounds=1, settings=LoopSettings(base_evals=BASE_EVALS, max_evals=EXT_EVALS), seed=0,
+                     out=work, progress=True)
     write_json_atomic(work / "result.json", {**res.to_dict(), "undeclared_truth": truth})
     report = write_report(res, work)
     rnd = res.rounds[0]
@@ -61,8 +62,8 @@ def run_close_loop_stage(out: Path) -> list[str]:
     from lss_fmu import rig_effects
     from lss_fmu.layouts import load_track
     drawn = rig_effects.draw_artefacts([OOC], OOC_SEED, float(load_track("layout7").length))[OOC]
-    res2 = close_loop(problem2, rounds=1, base_evals=80, max_evals=100, refine_evals=40, seed=0, out=work2,
-                      progress=True)
+    res2 = close_loop(problem2, rounds=1, settings=LoopSettings(base_evals=80, max_evals=100, refine_evals=40),
+                      seed=0, out=work2, progress=True)
     write_json_atomic(work2 / "result.json", {**res2.to_dict(), "undeclared_artefact": drawn})
     report2 = write_report(res2, work2)
     print(f"    verdict: {res2.verdict}", flush=True)

@@ -20,6 +20,7 @@ import pytest
 
 from identification.loop import catalogue
 from identification.loop.close_loop import close_loop
+from identification.loop.settings import LoopSettings
 from identification.objective.noise import ALPHA
 from identification.loop.synthetic import effect_case
 
@@ -31,9 +32,9 @@ LEAN = dict(QUICK, profile_points=0)   # and where the disturbance, not the base
 SLOW = pytest.mark.slow
 
 
-def _loop(problem, rounds=1, effects=None, **kw):
-    kw = {"base_evals": BASE_EVALS, "max_evals": EXT_EVALS, **kw}
-    return close_loop(problem, effects=effects, rounds=rounds, seed=0, **kw)
+def _loop(problem, rounds=1, effects=None, **budget):
+    settings = LoopSettings(**{"base_evals": BASE_EVALS, "max_evals": EXT_EVALS, **budget})
+    return close_loop(problem, effects=effects, rounds=rounds, seed=0, settings=settings)
 
 
 def _record(name: str, res, **extra) -> None:
@@ -148,7 +149,7 @@ def test_a_mass_the_cors_absorbed_is_searched_with_them(fmu_file):
     the factor is right."""
     params = {"effects.mass.transducer_factor": 1.25}
     problem, _ = effect_case([], 146954997, params=params, transducer=7)
-    res = _loop(problem, **QUICK, fit_evals=20, base_refine_evals=60, test_max=4)
+    res = _loop(problem, **QUICK, fit_evals=20, base_refine_evals=60, candidates=4)
     rnd = res.rounds[0]
     _record("mass_absorbed_a5_r01", res, truth=params)
     assert res.found == ["mass"], rnd.verdict

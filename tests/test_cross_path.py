@@ -16,6 +16,7 @@ import dataclasses
 import pytest
 
 from identification.loop.close_loop import close_loop
+from identification.loop.settings import LoopSettings
 from identification.pipeline.identify_grown import identify_grown
 from identification.objective.problem import drive_known, from_measurement
 from identification.loop.synthetic import effect_case
@@ -67,8 +68,8 @@ def test_loop_verdict_agrees_across_paths(two_paths):
     problem, _ = effect_case([], 146954997, params={"effects.mass.transducer_factor": 1.25}, transducer=7)
     out = []
     for p in two_paths:
-        res = close_loop(_on_path(problem, p), rounds=1, seed=0, base_evals=80, max_evals=100, refine_evals=40,
-                         fit_evals=20, base_refine_evals=60, test_max=4)
+        res = close_loop(_on_path(problem, p), rounds=1, seed=0, settings=LoopSettings(
+            base_evals=80, max_evals=100, refine_evals=40, fit_evals=20, base_refine_evals=60, candidates=4))
         out.append(res)
     assert [r.found for r in out] == [["mass"], ["mass"]], [r.verdict for r in out]
     for r in out:

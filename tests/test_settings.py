@@ -107,7 +107,7 @@ def test_one_file_holds_the_identification_and_the_loop_settings(tmp_path):
     """[identify] and [close_loop] in one file: each reader takes its table, the
     loop's defaults are the loop's own constants and reach close_loop's keywords."""
     from identification.loop import candidates, close_loop
-    from identification.loop.settings import LoopSettings, load_loop_settings
+    from identification.loop.settings import TEST_MAX, LoopSettings, load_loop_settings
     from identification.pipeline import base_polish
     path = tmp_path / "both.toml"
     path.write_text("[identify]\nmax_evals = 40\n[close_loop]\ncandidates = 2\nrefine_evals = 0\n")
@@ -117,8 +117,8 @@ def test_one_file_holds_the_identification_and_the_loop_settings(tmp_path):
     assert load_loop_settings(None) == LoopSettings(
         fit_evals=candidates.RESCORE_EVALS, refine_evals=candidates.REFINE_EVALS,
         base_refine_evals=base_polish.BASE_REFINE_EVALS, profile_points=base_polish.PROFILE_POINTS,
-        candidates=close_loop.TEST_MAX)
-    kw = loop.budget()
-    assert kw["test_max"] == 2 and kw["refine_evals"] == 0 and kw["polish_evals"] == kw["max_evals"] == 200
+        candidates=TEST_MAX)
+    assert loop.polish == loop.max_evals == 200 and loop.regrow == 200   # growing windows: regrown
+    assert LoopSettings(first_window=None).regrow == 0 and LoopSettings(polish_evals=0).polish == 0
     import inspect
-    assert set(kw) <= set(inspect.signature(close_loop.close_loop).parameters)
+    assert inspect.signature(close_loop.close_loop).parameters["settings"].default is None

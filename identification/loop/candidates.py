@@ -9,13 +9,13 @@ import dataclasses
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
 from ..objective.jacobian import demean_columns
 from .attribution import Attribution, sensitivity_signatures
-from ..pipeline.base_polish import BASE_REFINE_EVALS, PROFILE_POINTS, STEP
+from ..pipeline.base_polish import PROFILE_POINTS, STEP
 from .catalogue import CATALOGUE, SensorError
 from .evidence import fit_gain, lr_test, project_out
 from .extension import extended_problem, extension_of
@@ -28,9 +28,13 @@ from ..objective.noise import ALPHA, excess
 from ..objective.problem import IdentificationProblem, nrmsd, tared, weighted_residual
 from ..pipeline.refine import refine
 
+if TYPE_CHECKING:   # annotations only: the settings module reads this one's defaults
+    from .close_loop import Run
+    from .settings import LoopSettings
+
 log = logging.getLogger(__name__)
 
-RESCORE = 4          # effects fitted through the FMU after the linear ranking (at least close_loop's test_max) ...
+RESCORE = 4          # effects fitted through the FMU after the linear ranking (at least the settings' candidates) ...
 RESCORE_EVALS = 20   # ... with this many evaluations each
 REFINE_EVALS = 80    # simulations of the local refinement (identification.pipeline.refine) ending each extension
 
@@ -110,9 +114,8 @@ def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0:
     return [demean_columns(g, demean) for g in G]
 
 
-def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, seed, out, number, progress,
-                      workers, refine_evals, base_refine_evals=BASE_REFINE_EVALS,
-                      regrow_evals: int = 0, profile_points: int = PROFILE_POINTS) -> CandidateTest:
+def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, settings: "LoopSettings", run: "Run", *,
+                      number: int) -> CandidateTest:
     """The candidate through the tests. What the effect explains is measured
     where the base cannot move into another valley (the CoR landscape is rough
     and many-valleyed: a wider search with more parameters finds a lower valley
@@ -129,7 +132,11 @@ def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, *, max_evals, se
     If that leaves the extended model short of the noise (`adequacy`), it is
     identified once more as the base was, over growing windows (`regrow`,
     `regrow_evals` complex evaluations counted in whole-record simulations;
-    0: not)."""
+    0: not). The budgets come from `settings` (identification.loop.settings),
+    the seed, journal folder and processes from `run` (close_loop.Run)."""
+    max_evals, refine_evals, base_refine_evals = settings.max_evals, settings.refine_evals, settings.base_refine_evals
+    regrow_evals, profile_points = settings.regrow, settings.profile_points
+    seed, out, progress, workers = run.seed, run.out, run.progress, run.workers
     sc, ext, prob_ext = fit.score, fit.ext, fit.problem
     x0 = {**prob_ext.x0, **fit.stage1.problem.values(fit.stage1.x)}
     stage2 = dataclasses.replace(prob_ext, x0=x0)

@@ -36,6 +36,7 @@ import dataclasses
 import json
 import logging
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
 
@@ -45,84 +46,81 @@ from lss_fmu.atomic import write_json_atomic
 from lss_fmu.variables import FORCE_CHANNELS
 
 from .attribution import Attribution, attribute
-from ..pipeline.base_polish import BASE_REFINE_EVALS, PROFILE_POINTS, polish_base
-from .candidates import REFINE_EVALS, RESCORE, RESCORE_EVALS, examine_candidate, rescore
+from ..pipeline.base_polish import polish_base
+from .candidates import RESCORE, examine_candidate, rescore
 from .catalogue import CATALOGUE
 from .departures import departures
-from ..pipeline.growing import FIRST, grow
+from ..pipeline.growing import grow
 from ..pipeline.identify import identify
 from .locate import analyse, catalogue_bands, context, localise, signals_at
 from .loop_result import CloseLoopResult, Round
 from ..objective.noise import excess, noise_levels
 from ..objective.problem import IdentificationProblem, nrmsd, tared
 from .ripple_line import ripple_lines
+from .settings import LoopSettings
 from .verdict import decide
 from .settle import settle_provisional, still_needed
 
 log = logging.getLogger(__name__)
 
-TEST_MAX = 4         # candidates taken through the extended identification and the tests, best first: the
-                     # linear ranking puts a 2 mm bump or a 3 % heavier cart third or fourth behind periodic
-                     # effects; the Bonferroni m counts every hypothesis scanned, so testing more does not
-                     # loosen the test (benchmarks/bench_close_loop_rates.py)
-
 BASE_RESTARTS = 2        # times a round starts again from a better base found through an extension
 BASE_IMPROVE = 0.02      # ... when that base lowers S by at least this share
 
 
+@dataclass(frozen=True)
+class Run:
+    """What one run of the loop works with beside its settings: the seed (a
+    round's own: the run's plus the round's number), where it journals, its
+    processes, and what the sensor declares (the zero tolerance and the white
+    noise per force channel, N)."""
+    seed: int = 0
+    out: Optional[Path] = None
+    progress: bool = False
+    workers: int = 1
+    sensor_offset_std: Optional[dict] = None
+    noise_std: Optional[Mapping[str, float]] = None
+
+
 def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]] = None, *,
-               effects: Optional[Sequence[str]] = None, rounds: int = 1, base_evals: int = 300,
-               max_evals: int = 200, seed: int = 0, out: Optional[Path] = None, progress: bool = False,
-               workers: int = 1, sensor_offset_std: Optional[dict] = None,
-               fit_evals: int = RESCORE_EVALS, refine_evals: int = REFINE_EVALS,
-               base_refine_evals: int = BASE_REFINE_EVALS, noise_std: Optional[Mapping[str, float]] = None,
-               test_max: int = TEST_MAX, polish_evals: Optional[int] = None,
-               profile_points: int = PROFILE_POINTS, first_window: Optional[float] = FIRST,
-               regrow_evals: Optional[int] = None) -> CloseLoopResult:
+               effects: Optional[Sequence[str]] = None, rounds: int = 1, settings: Optional[LoopSettings] = None,
+               seed: int = 0, out: Optional[Path] = None, progress: bool = False, workers: int = 1,
+               sensor_offset_std: Optional[dict] = None,
+               noise_std: Optional[Mapping[str, float]] = None) -> CloseLoopResult:
     """The loop on one problem: base identification (unless x_base is given),
-    then up to `rounds` rounds of analysis, attribution, extension and tests.
-    `sensor_offset_std`: the transducer's declared zero tolerance per force
-    channel (N); offsets and gains within 3 sigma of it are not faults.
-    `noise_std`: its declared white noise per force channel (N; meta.json
-    sensor.force_noise_std_N), else estimated from the residual.
-    `polish_evals`: the complex run again from the base point at the start of
-    each round (default `max_evals`, what an extension gets; 0: none);
-    `profile_points`: the profile of the base's least-determined variable
-    (profile_polish; 0: none), on the base and on every regrown extension.
-    `first_window`: the base identification starts on the record's first
-    seconds and grows its window to the whole
-    record (identification.pipeline.growing; the complex's `base_evals` counted in
-    simulations of the whole record); None or 0: the complex on the whole
-    record. `regrow_evals`: an extension that passes the tests but stays
-    above the noise is identified again over growing windows with this many
-    complex evaluations (candidates.regrow; default `max_evals` when the
-    base grows its window, else 0: none)."""
+    then up to `rounds` rounds of analysis, attribution, extension and tests,
+    with the budgets of `settings` (identification.loop.settings; default
+    LoopSettings()). `sensor_offset_std`: the transducer's declared zero
+    tolerance per force channel (N); offsets and gains within 3 sigma of it
+    are not faults. `noise_std`: its declared white noise per force channel
+    (N; meta.json sensor.force_noise_std_N), else estimated from the
+    residual. A base not given is identified on growing windows from
+    `settings.first_window` s (identification.pipeline.growing; the complex's
+    `settings.base_evals` counted in simulations of the whole record), or
+    with the complex on the whole record where that is None or 0."""
     t0 = time.time()
-    if regrow_evals is None:
-        regrow_evals = max_evals if first_window else 0
+    settings = settings or LoopSettings()
     out = Path(out) if out else None
     if out:
         out.mkdir(parents=True, exist_ok=True)
+    run = Run(seed=seed, out=out, progress=progress, workers=workers, sensor_offset_std=sensor_offset_std,
+              noise_std=noise_std)
     grown = None
-    if x_base is None and first_window:
+    first = settings.first_window
+    if x_base is None and first:
         duration = float(problem.times[-1] - problem.times[0])
-        evals = int(round(base_evals * max(1.0, duration / float(first_window))))
-        x_base, grown = grow(problem, evals=evals, noise_std=noise_std, first=float(first_window),
-                             profile_points=profile_points, seed=seed,
-                             journal=out / f"base_first{float(first_window):g}s_journal.jsonl" if out else None)
+        evals = int(round(settings.base_evals * max(1.0, duration / float(first))))
+        x_base, grown = grow(problem, evals=evals, noise_std=noise_std, first=float(first),
+                             profile_points=settings.profile_points, seed=seed,
+                             journal=out / f"base_first{float(first):g}s_journal.jsonl" if out else None)
     elif x_base is None:
-        res = identify(problem, max_evals=base_evals, seed=seed, progress=progress, workers=workers,
+        res = identify(problem, max_evals=settings.base_evals, seed=seed, progress=progress, workers=workers,
                        journal=out / "base_journal.jsonl" if out else None)
         x_base = res.x
     x = np.asarray(x_base, float)
     base, result_rounds = problem, []
     remaining = list(effects or CATALOGUE)
     for k in range(1, rounds + 1):
-        rnd = one_round(base, x, k, remaining, max_evals=max_evals, seed=seed + k, out=out, progress=progress,
-                        workers=workers, sensor_offset_std=sensor_offset_std, fit_evals=fit_evals,
-                        refine_evals=refine_evals, base_refine_evals=base_refine_evals, noise_std=noise_std,
-                        test_max=test_max, polish_evals=max_evals if polish_evals is None else polish_evals,
-                        profile_points=profile_points, regrow_evals=regrow_evals)
+        rnd = one_round(base, x, k, remaining, settings, dataclasses.replace(run, seed=seed + k))
         result_rounds.append(rnd)
         if not (rnd.confirmed or rnd.provisional) or not [e for e in remaining if e != rnd.effect]:
             break
@@ -156,13 +154,8 @@ def hypothesis_counts(att: Attribution) -> dict:
     return out
 
 
-def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: Sequence[str], *,
-              max_evals: int, seed: int, out: Optional[Path], progress: bool, workers: int = 1,
-              sensor_offset_std: Optional[dict] = None, fit_evals: int = RESCORE_EVALS,
-              refine_evals: int = REFINE_EVALS, base_refine_evals: int = BASE_REFINE_EVALS,
-              noise_std: Optional[Mapping[str, float]] = None, test_max: int = TEST_MAX,
-              polish_evals: Optional[int] = None, profile_points: int = PROFILE_POINTS,
-              regrow_evals: int = 0) -> Round:
+def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: Sequence[str],
+              settings: LoopSettings, run: Run) -> Round:
     """One round (module docstring). The base must have had every chance the
     extension had: after each candidate's extended identification the base is
     refitted from the extension's base parameters, and if that lowers the base
@@ -171,12 +164,8 @@ def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: 
     x = np.asarray(x, float)
     restarts = []
     for attempt in range(BASE_RESTARTS + 1):
-        rnd, better = _attempt(base, x, number, effects, max_evals=max_evals, seed=seed, out=out, progress=progress,
-                               workers=workers, sensor_offset_std=sensor_offset_std, fit_evals=fit_evals,
-                               refine_evals=refine_evals, base_refine_evals=base_refine_evals, noise_std=noise_std,
-                               test_max=test_max, last=attempt == BASE_RESTARTS, attempt=attempt,
-                               polish_evals=max_evals if polish_evals is None else polish_evals,
-                               profile_points=profile_points, regrow_evals=regrow_evals)
+        rnd, better = _attempt(base, x, number, effects, settings, run, last=attempt == BASE_RESTARTS,
+                               attempt=attempt)
         rnd.base_restarts = restarts
         if better is None:
             return rnd
@@ -188,19 +177,19 @@ def one_round(base: IdentificationProblem, x: np.ndarray, number: int, effects: 
     return rnd
 
 
-def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, workers, sensor_offset_std, fit_evals,
-             refine_evals, base_refine_evals, noise_std, test_max, last, attempt=0, polish_evals=0,
-             profile_points=PROFILE_POINTS, regrow_evals=0) -> tuple:
+def _attempt(base, x, number, effects, settings: LoopSettings, run: Run, *, last: bool, attempt: int = 0) -> tuple:
     """(Round, None) or, if an extension's base parameters refit the base lower
     than it stands, (Round, (x, S, effect)) unless `last`."""
     sim = base.simulate(x)
     r0 = tared(base.samples - sim, base.tare)
-    noise = noise_levels(r0, noise_std)
+    seed, out = run.seed, run.out
+    noise = noise_levels(r0, run.noise_std)
     w = 1.0 / noise.sigma ** 2
     # 1. the base at its own optimum, in the likelihood's metric: a base that stopped above the
     # noise floor would hand its remainder to any flexible candidate
-    x, sim, base_refined = polish_base(base, x, sim, w, seed=seed, polish_evals=polish_evals,
-                                       base_refine_evals=base_refine_evals, profile_points=profile_points,
+    x, sim, base_refined = polish_base(base, x, sim, w, seed=seed, polish_evals=settings.polish,
+                                       base_refine_evals=settings.base_refine_evals,
+                                       profile_points=settings.profile_points,
                                        journal=out / f"round{number}_base{attempt}_journal.jsonl" if out else None)
     r_b = tared(base.samples - sim, base.tare)
     if noise.source == "estimated":   # at the refitted base
@@ -212,19 +201,20 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
     exc = excess(r_b, noise.sigma, len(base.free))
     sig = signals_at(base, x)
     ra, s = analyse(base, x, sim, sig)
-    ctx = context(base, x, sensor_offset_std, noise.sigma, s)
+    ctx = context(base, x, run.sensor_offset_std, noise.sigma, s)
     if s is not None and "motor_ripple" in effects:
         ripple = CATALOGUE["motor_ripple"]
         ctx.ripple_lines = ripple_lines(r_b, s, (ripple.P_MIN, ripple.P_MAX))
     cache = out / f"round{number}_attribution.json" if out else None
-    att = attribute(base, x, ctx, effects=effects, progress=progress)
+    att = attribute(base, x, ctx, effects=effects, progress=run.progress)
     if cache:
         write_json_atomic(cache, att.to_dict())
     counts = hypothesis_counts(att)
     m = max(1, sum(counts.values()))
     rnd = Round(number, f_base, H, att, "", x_base=x, residual=ra, base_problem=base, noise=noise, excess=exc,
                 base_refined=base_refined, S_base=S_b, hypotheses=m)
-    fits, dropped = rescore(base, x, att, f_base, n=max(RESCORE, test_max), evals=fit_evals, seed=seed, out=out, number=number)
+    fits, dropped = rescore(base, x, att, f_base, n=max(RESCORE, settings.candidates), evals=settings.fit_evals,
+                            seed=seed, out=out, number=number)
     rnd.dropped = dropped
     if cache:
         write_json_atomic(cache, att.to_dict())
@@ -237,12 +227,10 @@ def _attempt(base, x, number, effects, *, max_evals, seed, out, progress, worker
         rnd.dropped.append({"effect": "(departures)", "stage": "fit", "reason": str(exc)[:300]})
     # 3. the leading candidates through the extended identification and the tests
     better, passed = None, None
-    for fit in fits[:max(1, test_max)]:
+    for fit in fits[:max(1, settings.candidates)]:
         try:
-            t = examine_candidate(base, x, fit, att, S_b, w, m, counts.get(fit.score.effect, 1), max_evals=max_evals,
-                                  seed=seed, out=out, number=number, progress=progress, workers=workers,
-                                  refine_evals=refine_evals, base_refine_evals=base_refine_evals,
-                                  regrow_evals=regrow_evals, profile_points=profile_points)
+            t = examine_candidate(base, x, fit, att, S_b, w, m, counts.get(fit.score.effect, 1), settings, run,
+                                  number=number)
         except Exception as exc:   # a degenerate candidate: dropped, the loop goes on
             log.warning("round %d: candidate %s dropped: %s", number, fit.score.effect, exc)
             rnd.dropped.append({"effect": fit.score.effect, "stage": "extension", "reason": str(exc)[:300]})
@@ -285,5 +273,5 @@ def base_from_result(path, problem: IdentificationProblem) -> np.ndarray:
     return x
 
 
-__all__ = ["close_loop", "one_round", "CloseLoopResult", "Round", "localise", "base_from_result", "settle_provisional",
-           "BASE_REFINE_EVALS", "PROFILE_POINTS", "REFINE_EVALS", "RESCORE_EVALS", "TEST_MAX"]
+__all__ = ["close_loop", "one_round", "Run", "CloseLoopResult", "Round", "localise", "base_from_result",
+           "settle_provisional"]
