@@ -106,8 +106,8 @@ def test_the_front_door_has_few_options():
 def test_one_file_holds_the_identification_and_the_loop_settings(tmp_path):
     """[identify] and [close_loop] in one file: each reader takes its table, the
     loop's defaults are the loop's own constants and reach close_loop's keywords."""
-    from identification.loop import candidates, close_loop
-    from identification.loop.settings import TEST_MAX, LoopSettings, load_loop_settings
+    from identification.loop import close_loop
+    from identification.loop.settings import REFINE_EVALS, RESCORE_EVALS, TEST_MAX, LoopSettings, load_loop_settings
     from identification.pipeline import base_polish
     path = tmp_path / "both.toml"
     path.write_text("[identify]\nmax_evals = 40\n[close_loop]\ncandidates = 2\nrefine_evals = 0\n")
@@ -115,7 +115,7 @@ def test_one_file_holds_the_identification_and_the_loop_settings(tmp_path):
     loop = load_loop_settings(path)
     assert loop == LoopSettings(candidates=2, refine_evals=0)
     assert load_loop_settings(None) == LoopSettings(
-        fit_evals=candidates.RESCORE_EVALS, refine_evals=candidates.REFINE_EVALS,
+        fit_evals=RESCORE_EVALS, refine_evals=REFINE_EVALS,
         base_refine_evals=base_polish.BASE_REFINE_EVALS, profile_points=base_polish.PROFILE_POINTS,
         candidates=TEST_MAX)
     assert loop.polish == loop.max_evals == 200 and loop.regrow == 200   # growing windows: regrown

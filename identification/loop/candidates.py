@@ -9,7 +9,7 @@ import dataclasses
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Optional
+from typing import Optional
 
 import numpy as np
 
@@ -27,16 +27,11 @@ from .loop_result import MISFIT_SHARE, CandidateTest
 from ..objective.noise import ALPHA, excess
 from ..objective.problem import IdentificationProblem, nrmsd, tared, weighted_residual
 from ..pipeline.refine import refine
-
-if TYPE_CHECKING:   # annotations only: the settings module reads this one's defaults
-    from .close_loop import Run
-    from .settings import LoopSettings
+from .settings import LoopSettings
 
 log = logging.getLogger(__name__)
 
-RESCORE = 4          # effects fitted through the FMU after the linear ranking (at least the settings' candidates) ...
-RESCORE_EVALS = 20   # ... with this many evaluations each
-REFINE_EVALS = 80    # simulations of the local refinement (identification.pipeline.refine) ending each extension
+RESCORE = 4          # effects fitted through the FMU after the linear ranking (at least the settings' candidates)
 
 
 def evidence_order(score) -> float:
@@ -114,7 +109,7 @@ def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0:
     return [demean_columns(g, demean) for g in G]
 
 
-def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, settings: "LoopSettings", run: "Run", *,
+def examine_candidate(base, x_b, fit, att, S_b, w, m, m_effect, settings: LoopSettings, run, *,
                       number: int) -> CandidateTest:
     """The candidate through the tests. What the effect explains is measured
     where the base cannot move into another valley (the CoR landscape is rough

@@ -33,8 +33,9 @@ from typing import Any, Mapping, Optional, Union
 from ..pipeline.base_polish import BASE_REFINE_EVALS, PROFILE_POINTS
 from ..pipeline.growing import FIRST
 from ..pipeline.settings import SettingsError, table_of, typed
-from .candidates import REFINE_EVALS, RESCORE_EVALS
 
+RESCORE_EVALS = 20   # each top candidate fitted alone through the FMU with this many evaluations
+REFINE_EVALS = 80    # simulations of the local refinement (identification.pipeline.refine) ending each extension
 TEST_MAX = 4         # candidates taken through the extended identification and the tests, best first: the
                      # linear ranking puts a 2 mm bump or a 3 % heavier cart third or fourth behind periodic
                      # effects; the Bonferroni m counts every hypothesis scanned, so testing more does not
@@ -90,4 +91,4 @@ def load_loop_settings(path: Union[str, Path, None]) -> LoopSettings:
     return loop_settings_from(table_of(path, "close_loop"), where=f"{path} [close_loop]")
 
 
-__all__ = ["LoopSettings", "TEST_MAX", "load_loop_settings", "loop_settings_from"]
+__all__ = ["LoopSettings", "REFINE_EVALS", "RESCORE_EVALS", "TEST_MAX", "load_loop_settings", "loop_settings_from"]
