@@ -22,6 +22,9 @@ def register(sub, common) -> None:
     ap.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler")
     ap.add_argument("--workers", type=int, default=2, help="local processes (without --scheduler)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--surveyed", action="store_true",
+                    help="give the FMU each sorter's survey (DATA/survey/mNN.json: as-built track, cart mass, "
+                         "guide gap) instead of the design drawing")
     ap.add_argument("--no-progress", action="store_true")
     ap.set_defaults(run=run_campaign)
 
@@ -40,7 +43,8 @@ def run_campaign(args) -> int:
     models = [m for m in args.models.split(",") if m.strip()]
     results = campaign([Path(d) for d in args.data_dirs], models, Path(args.out),
                        settings=load_settings(args.settings), manifest=args.manifest, workers=args.workers,
-                       scheduler=args.scheduler, seed=args.seed, progress=not args.no_progress)
+                       scheduler=args.scheduler, seed=args.seed, progress=not args.no_progress,
+                       surveyed=args.surveyed)
     print(f"{len(results)} identifications in {args.out}/results; `lss report {args.out}` makes the report")
     return 0
 

@@ -27,6 +27,9 @@ def register(sub, common) -> None:
     ap.add_argument("--seed", type=int, default=0, help="the optimiser's seed (default 0)")
     ap.add_argument("--workers", type=int, default=1, help="local processes for simulations side by side: the complex's candidates, the Jacobians' "
                          "columns (default 1; the result is the same)")
+    ap.add_argument("--survey", default=None, metavar="JSON",
+                    help="a survey of the sorter (as-built track, cart mass, guide gap: lss_fmu.survey) given to "
+                         "the FMU instead of the design drawing")
     ap.add_argument("--no-progress", action="store_true", help="no progress bar")
     ap.set_defaults(run=run)
 
@@ -37,6 +40,7 @@ def run(args) -> int:
     from lss_fmu.atomic import write_json_atomic
     from lss_fmu.design import parse_model
     from lss_fmu.measurement import load_measurement
+    from lss_fmu.survey import load_survey
 
     from .figures.identification import forces_overlay, history, nrmsd_bars
 
@@ -45,13 +49,14 @@ def run(args) -> int:
     settings = load_settings(args.settings)
     model = parse_model(args.model)
     records = [load_measurement(d) for d in args.records]
-    problem = build_problem(records, model, settings)
+    survey = None if args.survey is None else load_survey(args.survey)
+    problem = build_problem(records, model, settings, survey=survey)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "identify.log"))
     res = identify_records(records, model, settings, seed=args.seed, journal=out / "journal.jsonl",
-                           progress=not args.no_progress, workers=args.workers, problem=problem)
+                           progress=not args.no_progress, workers=args.workers, problem=problem, survey=survey)
     write_json_atomic(out / "result.json", res.to_dict())
     title = f"{records[0].id}, model {model}"
     rp = res.problem   # on the window the result is for

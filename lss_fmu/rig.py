@@ -23,6 +23,8 @@ which identification never reads.
     DIR/mNN/                   measurement folders, NN the measurement's number (samples.csv, meta.json)
     DIR/answers/mNN/truth.json the truth of each measurement
     DIR/answers/tracks/*.layout  the as-built tracks of the field set
+    DIR/survey/mNN.json        the field set: what a survey of the sorter gives (lss_fmu.survey: its
+                               as-built track in DIR/survey/tracks/, mass factor, guide gap)
     DIR/fmu/LSSChain-<sha>.fmu the FMU that generated the set
 
 `generate_set(...)` runs measurements in parallel (one ChainSimulator per
@@ -52,6 +54,7 @@ import numpy as np
 from . import design
 from . import measurement as M
 from . import rig_effects as E
+from . import survey
 from .atomic import locked, write_json_atomic
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
 from .layouts import NOMINAL_PRETENSION, TABLE2, load_track
@@ -624,9 +627,27 @@ def run_measurement(set_name: str, number: int, out: Union[str, Path], sim, seed
     adir = answers_dir(out) / folder_name(number)
     adir.mkdir(parents=True, exist_ok=True)
     (adir / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    if case.field:
+        write_field_survey(out, number, case)
     return {"number": number, "layout": case.layout, "id": case.id, "n_samples": acq["n_samples"],
             "full_lap": acq["full_lap"], **{k: gen[k] for k in ("wall_s", "cpu_s", "simulated_time_s",
                                                                "cart_seconds_per_cpu_second")}}
+
+
+def write_field_survey(out: Path, number: int, case: "Case") -> Path:
+    """What a survey of a field-set sorter gives (lss_fmu.survey): its
+    as-built track (a copy beside the survey), the carts' mass factor and the
+    guide gap the rig drew, as DIR/survey/mNN.json."""
+    sdir = out / survey.FOLDER
+    track = None
+    if case.field.get("as_built_file"):
+        src = out / case.field["as_built_file"]
+        track = sdir / "tracks" / src.name
+        track.parent.mkdir(parents=True, exist_ok=True)
+        tmp = track.with_suffix(f".{os.getpid()}.tmp")
+        shutil.copyfile(src, tmp)
+        tmp.replace(track)
+    return survey.write_survey(sdir / f"{folder_name(number)}.json", case.field, track)
 
 
 # ---------------------------------------------------------------------------------------

@@ -375,7 +375,9 @@ def from_measurement(meas, model: str, free: Optional[Sequence[str]] = None, win
         filter_rate = filter_rate_of(meas.meta, aa, float(meas.sample_rate)) if aa is not None else None
     except ValueError as exc:
         raise ValueError(f"{getattr(meas, 'path', None) or meas.id}/meta.json: {exc}") from None
-    return IdentificationProblem(forces, t, meas.layout_for_fmu, model, bounds, fixed=extra,
+    # a survey's as-built track (`fixed` layout.name) is the problem's layout: its length places the chain
+    layout = str(extra.pop("layout.name", meas.layout_for_fmu))
+    return IdentificationProblem(forces, t, layout, model, bounds, fixed=extra,
                                  free=tuple(free or DESIGN), x0=x0, settle=settle, tolerance=tolerance,
                                  name=meas.id, tare=tol, anti_alias=aa, filter_rate=filter_rate,
                                  sample_rate=meas.sample_rate,

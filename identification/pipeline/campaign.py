@@ -22,6 +22,12 @@ cluster. Results are written atomically as each finishes
 (`journals/`); a campaign killed at any moment and started again skips what
 is finished and resumes the rest from its journal. A resume with other
 settings or another seed is refused: the results would mix two methods.
+
+Two conditions (`surveyed`): on the design drawing (what a user has), or
+with each sorter's survey given to the FMU (lss_fmu.survey: its as-built
+track, the carts' mass, the guide gap; `DATA/survey/mNN.json` beside each
+record, as the rig writes it for the field set), so that a report can show
+how much of the law question is a question of the geometry.
 """
 from __future__ import annotations
 
@@ -37,6 +43,7 @@ from typing import Callable, Optional, Sequence, Union
 from lss_fmu.atomic import write_json_atomic
 from lss_fmu.design import parse_model
 from lss_fmu.measurement import find_measurements, load_measurement
+from lss_fmu.survey import SurveyError, load_survey, same_survey, survey_path
 from tqdm import tqdm
 
 from .driver import RecordsError, build_problem, check_records, identify_records
@@ -62,6 +69,7 @@ class Task:
     out: str             # campaign folder
     settings: Settings
     seed: int
+    surveyed: bool = False   # the sorter's survey (lss_fmu.survey) given to the FMU
 
     @property
     def key(self) -> str:
@@ -115,15 +123,28 @@ def sorters_of_manifest(path: Union[str, Path]) -> list:
     return out
 
 
+def survey_of(sorter: Sorter) -> dict:
+    """The FMU values of a sorter's survey: each record's (DATA/survey/mNN.json
+    beside it), which must all describe the same sorter."""
+    surveys = [(p, load_survey(survey_path(p))) for p in sorter.records]
+    first, s0 = surveys[0]
+    for p, s in surveys[1:]:
+        if not same_survey(s0, s):
+            raise CampaignError(f"sorter {sorter.name}: the surveys {survey_path(first)} and {survey_path(p)} "
+                                f"differ: records of one sorter have one survey")
+    return s0
+
+
 def run_task(task: Task) -> dict:
     """One sorter identified with one model (in a worker); writes its result file atomically."""
     records = [load_measurement(p) for p in task.sorter.records]
     task.journal_path.parent.mkdir(parents=True, exist_ok=True)
     c0 = time.process_time()
-    problem = build_problem(records, task.model, task.settings)
+    survey = survey_of(task.sorter) if task.surveyed else None
+    problem = build_problem(records, task.model, task.settings, survey=survey)
     try:
         res = identify_records(records, task.model, task.settings, seed=task.seed, journal=task.journal_path,
-                               problem=problem)
+                               problem=problem, survey=survey)
         out = res.to_dict()
     finally:
         for q in getattr(problem, "parts", [problem]):
@@ -137,8 +158,9 @@ def run_task(task: Task) -> dict:
     return out
 
 
-def _same_run(out: Path, settings: Settings, seed: int) -> None:
-    """Refuse to resume a campaign that ran with other settings or another seed."""
+def _same_run(out: Path, settings: Settings, seed: int, surveyed: bool = False) -> None:
+    """Refuse to resume a campaign that ran with other settings, another seed
+    or the other condition (the design drawing, or the survey)."""
     path = out / "campaign.json"
     if not path.exists():
         return
@@ -152,6 +174,10 @@ def _same_run(out: Path, settings: Settings, seed: int) -> None:
     if before.get("seed") != seed:
         raise CampaignError(f"{path}: began with seed {before.get('seed')!r}, now {seed!r}: a campaign resumes "
                             f"with its seed (give another --out)")
+    if bool(before.get("surveyed", False)) != bool(surveyed):
+        was = "with the survey" if before.get("surveyed") else "on the design drawing"
+        raise CampaignError(f"{path}: began {was}, now {'with' if surveyed else 'without'} --surveyed: a "
+                            f"campaign resumes in its condition (give another --out)")
 
 
 def _one_kind(sorters: list, kinds: dict, by_folder: bool) -> None:
@@ -174,11 +200,15 @@ def _one_kind(sorters: list, kinds: dict, by_folder: bool) -> None:
 def run_campaign(data_dirs: Sequence[Union[str, Path]], models: Sequence[str], out: Union[str, Path], *,
                  settings: Optional[Settings] = None, manifest: Optional[Union[str, Path]] = None,
                  workers: int = 2, scheduler: Optional[str] = None, client=None, seed: int = 0,
-                 progress: bool = True, on_result: Optional[Callable[[dict], None]] = None) -> list:
+                 progress: bool = True, on_result: Optional[Callable[[dict], None]] = None,
+                 surveyed: bool = False) -> list:
     """Run what is not finished yet; return all results (finished before or
     now), in sorter then model order. `data_dirs`: folders of measurements,
     grouped by `sorters_in`; `manifest`: a TOML [sorters] table instead.
-    `on_result(result)` is called in this process as each task finishes."""
+    `on_result(result)` is called in this process as each task finishes.
+    `surveyed`: each sorter identified with its survey given to the FMU
+    (lss_fmu.survey: DATA/survey/mNN.json beside each record; checked for
+    every sorter before anything runs), else on the design drawing."""
     if isinstance(data_dirs, (str, Path)):
         data_dirs = [data_dirs]
     settings = settings or Settings()
@@ -201,14 +231,19 @@ def run_campaign(data_dirs: Sequence[Union[str, Path]], models: Sequence[str], o
             raise CampaignError(f"sorter {s.name}: {exc}") from None
         meta = records[0].meta or {}
         kinds.setdefault((meta.get("set"), records[0].protocol.name), s)
+        if surveyed:
+            try:
+                survey_of(s)
+            except SurveyError as exc:
+                raise CampaignError(f"sorter {s.name}: {exc}") from None
     _one_kind(sorters, kinds, manifest is None and len(data_dirs) > 1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    _same_run(out, settings, seed)
-    tasks = [Task(s, m, str(out), settings, int(seed)) for s in sorters for m in models]
+    _same_run(out, settings, seed, surveyed)
+    tasks = [Task(s, m, str(out), settings, int(seed), bool(surveyed)) for s in sorters for m in models]
     write_json_atomic(out / "campaign.json", {
         "data_dirs": [str(d) for d in data_dirs], "manifest": None if manifest is None else str(manifest),
-        "models": models, "seed": int(seed), "settings": settings.to_dict(),
+        "models": models, "seed": int(seed), "settings": settings.to_dict(), "surveyed": bool(surveyed),
         "sorters": {s.name: list(s.records) for s in sorters}, "tasks": [t.key for t in tasks]})
     todo = [t for t in tasks if not t.result_path.exists()]
     bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc="campaign", unit="id") if progress else None

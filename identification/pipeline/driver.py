@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -76,12 +76,15 @@ def _span(meas) -> float:
     return float(t[-1] - t[0]) if len(t) else 0.0
 
 
-def build_problem(records: Sequence, model: str, settings: Settings, sim=None):
+def build_problem(records: Sequence, model: str, settings: Settings, sim=None,
+                  survey: Optional[Mapping[str, object]] = None):
     """The problem the front door fits: one record's IdentificationProblem, or
-    several records' JointProblem, on the method's objective and window."""
+    several records' JointProblem, on the method's objective and window.
+    `survey`: FMU values of a survey of the sorter (lss_fmu.survey.load_survey:
+    its as-built track, mass factor, guide gap) in place of the design's."""
     check_records(records)
     method = method_of(records)
-    kw = dict(free=settings.free)
+    kw = dict(free=settings.free, fixed=dict(survey or {}))
     if method == "grown":
         span = min(_span(m) for m in records)
         kw.update(window=min(settings.window, span), tare=settings.tare, objective="likelihood")
@@ -93,17 +96,18 @@ def build_problem(records: Sequence, model: str, settings: Settings, sim=None):
 
 def identify_records(records: Sequence, model: str, settings: Optional[Settings] = None, *, seed=0,
                      journal: Optional[Path] = None, progress: bool = False, workers: int = 1, executor=None,
-                     problem=None):
+                     problem=None, survey: Optional[Mapping[str, object]] = None):
     """Identify `records` (loaded measurements of one sorter and protocol) with
     contact `model`; returns an identify.IdentificationResult whose `settings`
     and `method` say how (to_dict() carries both). `problem`: one already
-    built by build_problem (else it is built here). `workers` local
+    built by build_problem (else it is built here, with `survey`, which the
+    result then names). `workers` local
     processes, or an `executor` (a Dask client's get_executor()), run a
     transient identification's independent simulations side by side, the
     result the serial one's; a steady record's complex takes `workers`."""
     settings = settings or Settings()
     if problem is None:
-        problem = build_problem(records, model, settings)
+        problem = build_problem(records, model, settings, survey=survey)
     method = method_of(records)
     if method == "grown":
         res = identify_grown(problem, max_evals=settings.max_evals, seed=seed, journal=journal, progress=progress,
@@ -115,4 +119,5 @@ def identify_records(records: Sequence, model: str, settings: Optional[Settings]
                        workers=workers)
         res = dataclasses.replace(res, message=f"{res.message}; {STEADY_NOTE}")
     return dataclasses.replace(res, settings=settings.to_dict(), method=method,
-                               records=[str(m.path or m.id) for m in records])
+                               records=[str(m.path or m.id) for m in records],
+                               survey=None if survey is None else dict(survey))

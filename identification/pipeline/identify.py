@@ -71,6 +71,7 @@ class IdentificationResult:
     method: Optional[str] = None     # identification.pipeline.driver: "grown" or "statistics"
     settings: Optional[dict] = None  # identification.pipeline.driver: the settings used (Settings.to_dict)
     records: Optional[list] = None   # identification.pipeline.driver: the record folders fitted
+    survey: Optional[dict] = None    # identification.pipeline.driver: the survey's FMU values given (lss_fmu.survey)
 
     @classmethod
     def of(cls, problem, x0, f0: float, x, f: float, *, nfev: int, message: str, history_f, seconds: float,
@@ -102,7 +103,7 @@ class IdentificationResult:
             "grown": self.grown,
             "interval": None if self.intervals is None else {
                 symbol(iv.name): iv.to_dict() for iv in self.intervals},
-            "method": self.method, "settings": self.settings, "records": self.records,
+            "method": self.method, "settings": self.settings, "records": self.records, "survey": self.survey,
         }
 
 
