@@ -22,12 +22,14 @@ SECONDS = 1.5   # s of each record: the braking at 1 s inside it
 
 @pytest.fixture(scope="module")
 def field(tmp_path_factory, fmu_file):
-    """One start-stop of the field set (layout 7: as-built track, mass spread, guide gap; GZ contacts)."""
+    """One start-stop of the field set on its shortest chain (layout 7: as-built
+    track, mass spread, guide gap; GZ contacts)."""
+    number = next(n for n in range(1, 23) if rig.make_case("field", n).layout == "layout7")
     out = tmp_path_factory.mktemp("field")
-    res = rig.generate_set("field", out, [20], workers=1, fmu=fmu_file, lap_seconds=SECONDS, progress=False,
+    res = rig.generate_set("field", out, [number], workers=1, fmu=fmu_file, lap_seconds=SECONDS, progress=False,
                            protocol="start-stop", log=lambda *_: None)
     assert "error" not in res[0], res[0]
-    return out / "m20"
+    return out / rig.folder_name(number)
 
 
 def test_the_rig_writes_what_a_survey_of_the_field_sorter_gives(field):
@@ -63,7 +65,7 @@ def test_the_survey_brings_the_model_to_the_noise_on_the_field_set(field):
     ([1, 2], "a JSON object"),
 ])
 def test_a_bad_survey_is_refused_naming_the_file_and_the_key(tmp_path, content, message):
-    path = tmp_path / "m01.json"
+    path = tmp_path / "survey.json"
     path.write_text(json.dumps(content))
     with pytest.raises(SurveyError, match=message) as err:
         load_survey(path)
@@ -75,12 +77,12 @@ def test_a_surveyed_campaign_checks_every_survey_and_keeps_its_condition(field, 
     begun on the design drawing does not resume with the survey."""
     lonely = tmp_path / "data"
     lonely.mkdir()
-    shutil.copytree(field, lonely / "m20")
+    shutil.copytree(field, lonely / field.name)
     with pytest.raises(CampaignError, match="no survey file"):
         run_campaign([lonely], ["GZ"], tmp_path / "c0", surveyed=True, progress=False)
     out = tmp_path / "c1"
     (out / "results").mkdir(parents=True)
-    (out / "results" / "m20_GZ.json").write_text("{}")   # finished: nothing runs
+    (out / "results" / f"{field.name}_GZ.json").write_text("{}")   # finished: nothing runs
     run_campaign([field.parent], ["GZ"], out, progress=False)
     assert json.loads((out / "campaign.json").read_text())["surveyed"] is False
     with pytest.raises(CampaignError, match="began on the design drawing, now with --surveyed"):
