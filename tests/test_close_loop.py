@@ -59,6 +59,12 @@ def _evidence_reported(rnd) -> None:
     assert str(round(ev["statistic"], 1)) in rnd.verdict.replace(",", "") or "LR statistic" in rnd.verdict
 
 
+def _mass_weighed(rnd):
+    """An effect confirmed beside the transducer cart's mass, which the CoRs
+    absorb: the mass was fitted and tested as its rival first (close_loop)."""
+    assert rnd.effect == "mass" or "mass" in [t.effect for t in rnd.tests], [t.effect for t in rnd.tests]
+
+
 # one seed per effect (180-265 CPU-s a case at 184-187 ns per cart and right-hand side; the out-of-round
 # wheel: the two-effects case and the demo). Seeds 12 and 13 of the sensor and 11 and 13 of the mass were
 # confirmed too when written (docs/close_loop.md); the rates over many records:
@@ -112,6 +118,7 @@ def test_gain_only_sensor_error_is_a_sensor_fault(fmu_file):
     rnd = res.rounds[0]
     _record("gain_only_7", res, truth=params)
     assert res.found == ["sensor"], rnd.verdict
+    _mass_weighed(rnd)
     assert abs(rnd.identified["effects.sensor.gain.steering.F_right"] - 0.05) <= 0.25 * 0.05, rnd.identified
 
 
@@ -134,6 +141,7 @@ def test_the_issues_own_misses_are_confirmed(fmu_file, effect, params, seed, tra
     _record(f"issue_{effect}_{seed}", res, truth=params)
     assert res.found == [effect], rnd.verdict
     _evidence_reported(rnd)
+    _mass_weighed(rnd)
     want = _true_amplitude(effect, params, problem)
     assert abs(rnd.amplitude - want) <= 0.25 * abs(want), (rnd.amplitude, want, rnd.identified)
 

@@ -74,22 +74,32 @@ def rescore(base: IdentificationProblem, x: np.ndarray, att: Attribution, f_base
     for sc in att.ranking:
         if len(fits) >= n:
             break
-        try:
-            ext = extension_of(sc)
-            prob = extended_problem(base, x, ext)
-            stage1 = dataclasses.replace(prob, free=tuple(ext.free))
-            r = identify(stage1, max_evals=budget(evals, stage1, sc.effect), seed=seed, progress=False,
-                         journal=out / f"round{number}_fit_{sc.effect}.jsonl" if out else None)
-        except Exception as exc:
-            log.warning("round %d: candidate %s dropped: %s", number, sc.effect, exc)
-            dropped.append({"effect": sc.effect, "stage": "fit", "reason": str(exc)[:300]})
-            continue
-        sc.share_fit = max(0.0, (f_base - r.f) / f_base) if f_base > 0 else 0.0
-        fits.append(Fit(sc, ext, prob, r))
+        fit = fit_score(base, x, sc, f_base, evals=evals, seed=seed, out=out, number=number, dropped=dropped)
+        if fit is not None:
+            fits.append(fit)
     fits.sort(key=lambda f: -evidence_order(f.score))
     ranked = [f.score for f in fits]
     att.ranking = ranked + [sc for sc in att.ranking if all(sc is not r for r in ranked)]
     return fits, dropped
+
+
+def fit_score(base: IdentificationProblem, x: np.ndarray, sc, f_base: float, *, evals: int, seed: int,
+              out: Optional[Path], number: int, dropped: list) -> Optional[Fit]:
+    """One effect's hypothesis fitted through the FMU, its parameters alone and
+    the base held at x (rescore's fit); None, with the reason in `dropped`, if
+    its extension cannot be built or fitted."""
+    try:
+        ext = extension_of(sc)
+        prob = extended_problem(base, x, ext)
+        stage1 = dataclasses.replace(prob, free=tuple(ext.free))
+        r = identify(stage1, max_evals=budget(evals, stage1, sc.effect), seed=seed, progress=False,
+                     journal=out / f"round{number}_fit_{sc.effect}.jsonl" if out else None)
+    except Exception as exc:
+        log.warning("round %d: candidate %s dropped: %s", number, sc.effect, exc)
+        dropped.append({"effect": sc.effect, "stage": "fit", "reason": str(exc)[:300]})
+        return None
+    sc.share_fit = max(0.0, (f_base - r.f) / f_base) if f_base > 0 else 0.0
+    return Fit(sc, ext, prob, r)
 
 
 def signature_columns(base: IdentificationProblem, x: np.ndarray, sc, ext, sim0: np.ndarray,

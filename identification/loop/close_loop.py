@@ -47,7 +47,7 @@ from lss_fmu.variables import FORCE_CHANNELS
 
 from .attribution import Attribution, attribute
 from ..pipeline.base_polish import polish_base
-from .candidates import RESCORE, examine_candidate, rescore
+from .candidates import RESCORE, examine_candidate, fit_score, rescore
 from .catalogue import CATALOGUE
 from .departures import departures
 from ..pipeline.growing import grow
@@ -246,8 +246,35 @@ def _attempt(base, x, number, effects, settings: LoopSettings, run: Run, *, last
             passed = t   # (one that passes but leaves the model above the noise: the next may do better)
     if better is not None:
         return rnd, better
+    if passed is not None:
+        _absorbed_rivals(base, x, att, effects, f_base, S_b, w, m, counts, rnd, settings, run, number)
     decide(rnd, base, r_b, s, w)
     return rnd, None
+
+
+def _absorbed_rivals(base, x, att, effects, f_base, S_b, w, m, counts, rnd: Round, settings: LoopSettings,
+                     run: Run, number: int) -> None:
+    """Before a candidate that passes is confirmed, every effect the base's
+    CoRs can absorb (catalogue ABSORBED: the transducer cart's mass) that was
+    not tested is fitted and tested too, as its rival: such an effect changes
+    the record in ways the CoRs half imitate, so its linear score ranks it
+    low, and another candidate can take its misfit (verdict._rivals then
+    weighs the two by BIC)."""
+    tested = {t.effect for t in rnd.tests}
+    for name in [e for e in effects if CATALOGUE[e].ABSORBED and e not in tested]:
+        sc = next((s for s in att.ranking if s.effect == name), None)
+        if sc is None:
+            continue
+        fit = fit_score(base, x, sc, f_base, evals=settings.fit_evals, seed=run.seed, out=run.out, number=number,
+                        dropped=rnd.dropped)
+        if fit is None:
+            continue
+        try:
+            rnd.tests.append(examine_candidate(base, x, fit, att, S_b, w, m, counts.get(name, 1), settings, run,
+                                               number=number))
+        except Exception as exc:   # a degenerate rival: dropped, the verdict goes on without it
+            log.warning("round %d: rival %s dropped: %s", number, name, exc)
+            rnd.dropped.append({"effect": name, "stage": "rival", "reason": str(exc)[:300]})
 
 
 def base_from_result(path, problem: IdentificationProblem) -> np.ndarray:
