@@ -10,6 +10,7 @@ from identification.pipeline import growing
 from identification.objective.joint import JointProblem, own
 from identification.pipeline.joint_start import single_start, trigger_scan
 from identification.objective.problem import from_measurement, weighted_residual
+from identification.objective.uncertainty import intervals
 from identification.pipeline.windowing import truncated
 from lss_fmu.design import TRIGGER
 from lss_fmu.rig import load_truth, true_design_values
@@ -37,6 +38,19 @@ def _joint(records):
     return JointProblem(parts), truth
 
 
+def _in_the_starts_valley(jp, x, x_start):
+    """A start at the truth is followed, not left: the end point fits at least
+    as well, and e_JA, e_SW and e_RW are within 3 sd of the start by the
+    record's own intervals there (on these 0.6 s windows one sd is 0.02-0.03:
+    a fixed tolerance of 0.03 would test the noise draw; e_JR is not
+    identifiable here)."""
+    assert jp(x) <= jp(x_start) * (1 + 1e-3), (jp(x), jp(x_start))
+    sd = {iv.name: iv.sd for iv in intervals(jp, x)}
+    for c in ("e_JA", "e_SW", "e_RW"):
+        k = jp.free.index(f"contact.{c}")
+        assert abs(x[k] - x_start[k]) <= 3 * sd[f"contact.{c}"], (c, x[k], x_start[k], sd[f"contact.{c}"])
+
+
 def test_the_trigger_scan_finds_a_records_trigger_point(two_records):
     jp, truth = _joint(two_records)
     part = jp.parts[1]
@@ -62,8 +76,7 @@ def test_a_start_given_skips_the_complex(two_records, monkeypatch):
     x, info = growing.grow(jp, start=x_true, channel_weights=w, reset_unseen=True)
     assert not info["unseen"]                                   # nothing reset: the start is not random
     assert all(t["S_per_sample"] < 1.3 for t in info["windows"])   # at the noise on every window
-    k = [jp.free.index(f"contact.{c}") for c in ("e_JA", "e_SW", "e_RW")]   # e_JR: not identifiable here
-    assert np.allclose(x[k], x_true[k], atol=0.03)               # the CoRs stay where the truth put them
+    _in_the_starts_valley(jp, x, x_true)                          # the CoRs stay where the truth put them
 
 
 def test_the_single_start_is_the_first_record_and_the_others_triggers(two_records):
@@ -120,8 +133,7 @@ def test_a_retry_replaces_a_complex_left_above_the_noise(two_records, monkeypatc
     assert r["taken"] and r["S_per_sample_retry"] < 1.2 < r["S_per_sample_complex"]
     assert info["unseen"] == []                      # nothing reset on the retry's point
     assert info["windows"][0]["S_per_sample"] == pytest.approx(r["S_per_sample_retry"])
-    k = [jp.free.index(f"contact.{c}") for c in ("e_JA", "e_SW", "e_RW")]
-    assert np.allclose(x[k], x_true[k], atol=0.03)
+    _in_the_starts_valley(jp, x, x_true)
 
 
 def test_a_failed_retry_leaves_the_complexs_point(two_records, monkeypatch):
@@ -152,8 +164,7 @@ def test_the_auto_start_takes_the_first_record_where_the_complex_fails(two_recor
     monkeypatch.setattr(ig, "PROFILE_POINTS", 0)   # the stand-in complex's point left as it is
     res = ig.identify_grown(jp, start="auto", max_evals=5, refine_evals=0)
     assert "started from the first record alone" in res.message
-    k = [jp.free.index(f"contact.{c}") for c in ("e_JA", "e_SW", "e_RW")]
-    assert np.allclose(res.x[k], x_true[k], atol=0.03)
+    _in_the_starts_valley(jp, res.x, x_true)
     with pytest.raises(ValueError, match="start 'somewhere' is not one of complex, single, auto"):
         ig.identify_grown(jp, start="somewhere")
 
