@@ -53,7 +53,7 @@ from scipy import optimize, stats  # noqa: E402
 
 from identification.loop.catalogue import MotorRipple, WheelOutOfRound  # noqa: E402
 from identification.loop.synthetic import TRUTH, effect_case  # noqa: E402
-from identification.objective.jacobian import jacobian  # noqa: E402
+from identification.objective.jacobian import demean_columns, jacobian  # noqa: E402
 from identification.objective.noise import ALPHA  # noqa: E402
 from identification.objective.uncertainty import ROUGH  # noqa: E402
 from identification.objective.problem import from_measurement  # noqa: E402
@@ -82,17 +82,14 @@ def lambda_90(c: float) -> float:
     return float(optimize.brentq(lambda lam: stats.ncx2.sf(c, Q, lam) - 0.9, 1e-6, 1e5))
 
 
-def demeaned(g: np.ndarray) -> np.ndarray:
-    return g - g.mean(axis=0)
-
-
 def projector(J: np.ndarray, w: np.ndarray):
     """g -> g projected off the base columns J (n, ch, k) in the metric w per channel, after the tare."""
-    A = np.stack([(demeaned(J[:, :, k]) * np.sqrt(w)).ravel() for k in range(J.shape[2])], axis=1)
+    every = np.ones(J.shape[1], bool)   # the tare takes every channel's mean out
+    A = np.stack([(demean_columns(J[:, :, k], every) * np.sqrt(w)).ravel() for k in range(J.shape[2])], axis=1)
     Q_, _ = np.linalg.qr(A)
 
     def info(g: np.ndarray) -> float:
-        v = (demeaned(g) * np.sqrt(w)).ravel()
+        v = (demean_columns(g, every) * np.sqrt(w)).ravel()
         v = v - Q_ @ (Q_.T @ v)
         return float(v @ v)
     return info

@@ -55,7 +55,7 @@ from . import design
 from . import measurement as M
 from . import rig_effects as E
 from . import survey
-from .atomic import locked, write_json_atomic
+from .atomic import locked, write_atomic, write_json_atomic
 from .layout_format import CURVE, SPIRAL, STRAIGHT, VCURVE, format_layout
 from .layouts import NOMINAL_PRETENSION, TABLE2, load_track
 from .protocol import NAMES as PROTOCOLS
@@ -644,9 +644,7 @@ def write_field_survey(out: Path, number: int, case: "Case") -> Path:
         src = out / case.field["as_built_file"]
         track = sdir / "tracks" / src.name
         track.parent.mkdir(parents=True, exist_ok=True)
-        tmp = track.with_suffix(f".{os.getpid()}.tmp")
-        shutil.copyfile(src, tmp)
-        tmp.replace(track)
+        write_atomic(track, src.read_text())
     return survey.write_survey(sdir / f"{folder_name(number)}.json", case.field, track)
 
 
