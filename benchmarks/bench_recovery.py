@@ -16,6 +16,9 @@ result is for), CPU time.
     .venv/bin/python benchmarks/bench_recovery.py --measurements 1-22 --json benchmarks/results/recovery.json
     .venv/bin/python benchmarks/bench_recovery.py --table --json benchmarks/results/recovery.json
 
+`--set drawn --rig-seed S` runs the same table on cases the method was not
+tuned on: CoRs drawn over the box, another sorter's draws and noise.
+
 Everything is kept under --work (the records, the campaign's results and
 journals): stopped and started again it resumes; the JSON is rewritten as
 each measurement finishes, every row stamped with the code it ran on.
@@ -43,7 +46,7 @@ from identification.pipeline.windowing import truncated  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import CORS, SYMBOL, TRIGGER  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
-from lss_fmu.rig import generate_set, load_truth, parse_numbers, true_design_values  # noqa: E402
+from lss_fmu.rig import DEFAULT_SEED, generate_set, load_truth, parse_numbers, true_design_values  # noqa: E402
 
 TARGET = {"e_JA": 0.03, "e_SW": 0.03, "e_RW": 0.03, "e_JR": 0.05}
 HEADLINE = ("e_JA", "e_SW", "e_RW")   # the CoRs a start-stop determines; the table's count is on these
@@ -151,6 +154,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", default="build/bench_recovery")
     ap.add_argument("--protocol", default="start-stop")
+    ap.add_argument("--set", default="recovery", choices=("recovery", "drawn"), dest="set_name",
+                    help="the rig's set: Table 3's CoRs, or CoRs drawn over the box (cases the method was not "
+                         "tuned on)")
+    ap.add_argument("--rig-seed", type=int, default=DEFAULT_SEED,
+                    help="the rig's seed: another sorter's speeds, pretensions, parking places and noise")
     ap.add_argument("--measurements", default="1-22")
     ap.add_argument("--repeats", type=int, default=3, help="records per measurement, identified jointly")
     ap.add_argument("--seconds", type=float, default=None, help="record length, s (default: the protocol's)")
@@ -171,11 +179,13 @@ def main(argv=None) -> int:
     settings = load_settings(args.settings)
     stamp = code_stamp()
     base = Path(args.work) / args.protocol
+    if args.set_name != "recovery" or args.rig_seed != DEFAULT_SEED:
+        base = base.with_name(f"{args.protocol}_{args.set_name}_s{args.rig_seed}")
     dirs = [base / ("data" if k == 0 else f"data_r{k}") for k in range(args.repeats)]
     fmu = set_fmu(dirs[0])
     t0, gen_cpu = time.time(), 0.0
     for k, d in enumerate(dirs):
-        gen = generate_set("recovery", d, numbers, workers=args.workers, protocol=args.protocol,
+        gen = generate_set(args.set_name, d, numbers, seed=args.rig_seed, workers=args.workers, protocol=args.protocol,
                            progress=not args.no_progress,
                            repeat=k, lap_seconds=args.seconds, log=lambda msg: print(msg, file=sys.stderr), fmu=fmu)
         gen_cpu += sum(r.get("cpu_s", 0.0) for r in gen if "cpu_s" in r)
@@ -183,12 +193,16 @@ def main(argv=None) -> int:
     old = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
     if old and old.get("settings") != settings.to_dict():
         raise SystemExit(f"{args.json}: holds rows of other settings; give another --json")
+    if old and (old.get("set", "recovery"), old.get("rig_seed", DEFAULT_SEED)) != (args.set_name, args.rig_seed):
+        raise SystemExit(f"{args.json}: holds rows of set {old.get('set', 'recovery')} seed "
+                         f"{old.get('rig_seed', DEFAULT_SEED)}; give another --json")
     # and so do this run's rows made by this code (finished already: the campaign does not run them again)
     rows = {q["number"]: q for q in old.get("rows", []) if q["number"] not in numbers or q.get("code") == stamp}
 
     def write() -> None:
         ordered = sorted(rows.values(), key=lambda q: q["number"] or 0)
         report = {"command": " ".join(sys.argv), "protocol": args.protocol, "repeats": args.repeats,
+                  "set": args.set_name, "rig_seed": args.rig_seed,
                   "settings": settings.to_dict(), "rows": ordered, "summary": summary(ordered),
                   "wall_s": time.time() - t0, "generation_cpu_s": gen_cpu}
         if args.json:

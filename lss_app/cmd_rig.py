@@ -1,6 +1,6 @@
 """`lss rig`: generate the synthetic measurement sets (lss_fmu.rig).
 
-    lss rig --set recovery|field --out DIR [--measurements 1,2,19-22]
+    lss rig --set recovery|field|drawn --out DIR [--measurements 1,2,19-22]
             [--workers N] [--seed S] [--overwrite] [--fmu PATH] [--lap-seconds T]
             [--effects wheel_oor,sensor,...] [--effect-seed S] [--artefact channel_bump]
 """
@@ -20,7 +20,7 @@ def register(sub, common) -> None:
                     "(never read by identification). See docs/measurements.md.")
     ap.add_argument("--set", required=True, choices=rig.SETS, dest="set_name",
                     help="recovery: LW truth with Table 3 CoRs; field: GZ truth, unequal cart mass, "
-                         "as-built track")
+                         "as-built track; drawn: LW truth with CoRs drawn over the box from --seed")
     ap.add_argument("--out", required=True, metavar="DIR", help="output folder")
     ap.add_argument("--measurements", metavar="LIST", default=None,
                     help="subset, e.g. 1,2,19-22 (default: all 22; 9-11 are layout 3, the slow one)")

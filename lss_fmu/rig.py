@@ -1,6 +1,6 @@
 """The virtual transducer cart: the paper's 22 measurements, synthesised.
 
-Two sets (docs/measurements.md):
+Three sets (docs/measurements.md):
 
 * `recovery`: the truth is the model itself: contact law LW, the CoRs of the
   paper's Table 3 (measurement k gets row k), the layout-dependent values
@@ -13,6 +13,9 @@ Two sets (docs/measurements.md):
   heavier or lighter than their type's nominal mass, the guide play differs
   from nominal, and the track deviates slightly from its drawing (curve and
   vertical-curve radii and straight lengths perturbed, the loop re-closed).
+* `drawn`: `recovery` with other contacts: every CoR of every measurement
+  drawn uniformly over the CoR box from the seed, so a method tuned on Table
+  3 is checked on values it has never seen.
 
 Each measurement is simulated by the FMU at the sensor model's internal rate
 (1200 Hz), passed through the sensor model (lss_fmu.sensor) and written as a
@@ -29,7 +32,7 @@ which identification never reads.
 
 `generate_set(...)` runs measurements in parallel (one ChainSimulator per
 worker process) with a progress bar; `lss rig` is its command line
-(lss_fmu.rig_cli). Either set can carry undeclared effects of the FMU's
+(lss_fmu.rig_cli). Every set can carry undeclared effects of the FMU's
 catalogue and an artefact outside it (lss_fmu.rig_effects): in the FMU
 parameters and the truth, never in meta.json.
 """
@@ -64,7 +67,7 @@ from .sensor import CHANNELS, S_CHANNEL, SensorModel
 from .triggered import arriving_cart
 from .variables import BY_NAME, CONTACT_MODELS
 
-SETS = ("recovery", "field")
+SETS = ("recovery", "field", "drawn")
 DEFAULT_SEED = 20120901
 SETTLE_TIME = 4.0             # s: the trigger is armed after this (start transient)
 ARRIVAL_DELAY = (1.0, 2.0)    # s after arming: when the transducer cart reaches s_M (uniform)
@@ -334,6 +337,10 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
     arrival = SETTLE_TIME + float(rm.uniform(*ARRIVAL_DELAY))
     truth = {"v_s": v, "d": d, "mu_d": mu, "s_M": s_M, "K_P": kp, "K_I": ki}
     cor = dict(zip(COR_NAMES, TABLE3[number - 1]))
+    if set_name == "drawn":
+        # contacts the identification has never been tuned on: each CoR uniform over the box it searches
+        rc = np.random.default_rng([seed, number, 5])
+        cor = {k: round(float(rc.uniform(*design.COR_BOUNDS)), 3) for k in COR_NAMES}
 
     field, layout_fmu, geometry = {}, layout, None
     law = "LW"

@@ -60,6 +60,23 @@ def test_cases_reproducible_and_within_bounds():
         assert 0.95 <= f.fmu_params["cart.mass_factor"] <= 1.05
 
 
+def test_drawn_set_draws_every_cor_over_the_box_and_nothing_else():
+    lo, hi = design.COR_BOUNDS
+    drawn = []
+    for n in range(1, 23):
+        a, d = rig.make_case("recovery", n), rig.make_case("drawn", n)
+        assert d == rig.make_case("drawn", n)                          # same seed, same draw
+        assert d.truth == a.truth and d.contact_law == "LW"             # only the contacts differ
+        assert all(lo <= d.cor[k] <= hi for k in rig.COR_NAMES)
+        assert {k: d.fmu_params[f"contact.{k}"] for k in rig.COR_NAMES} == d.cor
+        assert tuple(d.cor[k] for k in rig.COR_NAMES) != rig.TABLE3[n - 1]
+        assert rig.make_case("drawn", n, seed=5).cor != d.cor           # another seed, other contacts
+        drawn += list(d.cor.values())
+    # 88 draws over the box: they fill it (a uniform draw leaves each quarter empty with p < 1e-10)
+    quarters = np.histogram(drawn, bins=4, range=(lo, hi))[0]
+    assert quarters.min() >= 10, quarters
+
+
 def test_as_built_track_closes_and_differs_slightly(tmp_path):
     path, desc, spec = rig._as_built_track("layout5", 11, tmp_path)
     t, t0 = load_track(str(path)), load_track("layout5")
