@@ -40,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_common import ROOT, hash_sources, write_between  # noqa: E402
 from bench_recovery import set_fmu  # noqa: E402
 from identification import Settings  # noqa: E402
+from identification.pipeline.settings import load_settings  # noqa: E402
 from identification.pipeline import (driver, growing, identify, identify_grown, windowing,  # noqa: E402
                                      edge_probe, joint_start)
 from identification.objective.problem import IdentificationProblem  # noqa: E402
@@ -230,6 +231,7 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default="build/bench_recovery")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", nargs="+", default=None, help="the profile's file (--doc: before and after)")
+    ap.add_argument("--settings", default=None, help="an expert's settings file (default: the defaults)")
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
     ap.add_argument("--doc", action="store_true", help="write the tables of the --json files (before, after) into "
                     "docs/benchmarks.md and stop")
@@ -244,9 +246,11 @@ def main(argv=None) -> int:
                       "\n".join(f"{h}\n{t}\n" for h, t in zip(heads, texts)))
         return 0
     args.json = args.json[0] if args.json else None
-    settings = Settings()
+    settings = load_settings(args.settings)
     old = json.loads(Path(args.json).read_text()) if args.json and Path(args.json).exists() else {}
     numbers = parse_numbers(args.measurements)
+    if old and old.get("settings") != settings.to_dict():
+        raise SystemExit(f"{args.json}: a profile of other settings; give another --json")
     rows = {m["measurement"]: m for m in old.get("rows", []) if m["measurement"] not in numbers}
     stamp = hash_sources(__import__("hashlib").sha256()).hexdigest()[:12]
     for n in numbers:

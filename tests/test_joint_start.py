@@ -194,3 +194,50 @@ def test_restarts_take_the_next_seed_while_a_record_is_off_the_noise(two_records
     assert seeds == [0] and np.allclose(res.x[k], x_off[k])
     with pytest.raises(ValueError, match="restarts = -1 must be 0 or more"):
         ig.identify_grown(jp, restarts=-1)
+
+
+def test_what_sets_the_chain_at_rest_is_the_pretension_and_the_trigger_points(two_records):
+    from types import SimpleNamespace
+    from lss_fmu.protocol import Protocol
+    jp, _ = _joint(two_records)
+    assert growing.at_rest(jp) == ["chain.pretension", TRIGGER, own(1)]
+    steady = SimpleNamespace(protocol=Protocol("steady"), free=jp.free)
+    assert growing.at_rest(steady) == []   # no start from rest: nothing relaxes
+
+
+def test_holding_the_rest_relaxes_each_record_once_in_the_complex(two_records, monkeypatch):
+    """hold_rest: the complex varies what does not move the chain at rest, so
+    its evaluations restore the records' relaxed chains instead of relaxing
+    anew; Levenberg-Marquardt then frees the pretension and the trigger points
+    on the first window."""
+    from lss_fmu.runner import ChainSimulator
+    jp, _ = _joint(two_records)
+    q = truncated(jp, jp.times[0] + 0.3)   # the first window only: no growing windows after it
+    w = 1.0 / np.asarray(q.noise, float) ** 2
+    seen, relaxed = {}, []
+    keep = ChainSimulator._keep_rest
+
+    def counted(self, key):
+        relaxed.append(seen.get("in_complex", False))
+        return keep(self, key)
+    monkeypatch.setattr(ChainSimulator, "_keep_rest", counted)
+    real = growing.identify
+
+    def spy(problem, **kw):
+        seen["free"], seen["in_complex"] = tuple(problem.free), True
+        try:
+            return real(problem, **kw)
+        finally:
+            seen["in_complex"] = False
+    monkeypatch.setattr(growing, "identify", spy)
+    x, info = growing.grow(q, evals=15, channel_weights=w, profile_points=1, hold_rest=True)
+    assert info["rest_held"] == ["chain.pretension", TRIGGER, own(1)]
+    assert not set(info["rest_held"]) & set(seen["free"])
+    assert sum(relaxed_in for relaxed_in in relaxed) <= len(q.parts)   # once per record, or restored
+    assert len(x) == len(q.free)
+    start = dict(zip(q.free, q.x0_vector()))
+    assert any(abs(v - start[n]) > 0 for n, v in zip(q.free, x) if n in info["rest_held"])   # freed and moved
+    # without the hold, every evaluation of the complex moves the pretension and relaxes again
+    relaxed.clear()
+    growing.grow(q, evals=15, channel_weights=w, profile_points=1)
+    assert sum(relaxed) > 2 * len(q.parts)

@@ -113,7 +113,7 @@ def identify_records(records: Sequence, model: str, settings: Optional[Settings]
         res = identify_grown(problem, max_evals=settings.max_evals, seed=seed, journal=journal, progress=progress,
                              restarts=settings.restarts, refine_evals=settings.refine_evals, uncertainty=True,
                              shrink=settings.shrink, start=settings.start, first=settings.first_window,
-                             workers=workers, executor=executor)
+                             hold_rest=settings.hold_rest, workers=workers, executor=executor)
     else:
         res = identify(problem, max_evals=settings.steady_evals, seed=seed, journal=journal, progress=progress,
                        workers=workers)

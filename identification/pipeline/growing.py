@@ -29,10 +29,13 @@ from typing import Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
+from lss_fmu.design import TRIGGER
+from lss_fmu.runner import TUNABLE
 from lss_fmu.variables import FORCE_CHANNELS
 
 from .base_polish import STEP, profile_polish
 from .identify import identify
+from ..objective.joint import JointProblem
 from ..objective.noise import noise_levels
 from ..objective.problem import IdentificationProblem, tared
 from .refine import refine
@@ -76,12 +79,23 @@ def windows(duration: float, first: float = FIRST, growth: float = GROWTH) -> li
     return out + [float(duration)]
 
 
+def at_rest(problem) -> list:
+    """The free variables that set a chain at rest (a start from rest relaxes
+    again for each value): the trigger points, where the chain stands, and
+    every FMU value the relaxation reads (not tunable: the pretension); none
+    for a record that does not start from rest."""
+    if not getattr(problem.protocol, "from_rest", False):
+        return []
+    return [n for n in problem.free if n.partition("@")[0] == TRIGGER
+            or (n.partition("@")[0] not in TUNABLE and "." in n)]
+
+
 def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optional[Mapping[str, float]] = None,
          first: float = FIRST, growth: float = GROWTH, profile_points: int = 9, seed: int = 0,
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
          reset_unseen: bool = False, start: Optional[Sequence[float]] = None,
-         retry: Optional[Callable[[], tuple]] = None, workers: int = 1) -> tuple:
+         retry: Optional[Callable[[], tuple]] = None, workers: int = 1, hold_rest: bool = False) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -112,15 +126,21 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     complex's first window is at the noise nothing changes. Every window's
     entry lists the records whose S at its end lies RETRY_Z sd above the
     noise (`records_off`). `workers`: the complex's candidates side by side
-    (identify; the serial run's result).
+    (identify; the serial run's result). `hold_rest`: the complex (and the
+    profile) hold what sets the chain at rest (at_rest: the pretension, the
+    trigger points) at their start values, so each record relaxes once
+    instead of once per evaluation; Levenberg-Marquardt then frees them on
+    the first window (`info["rest_held"]`).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
     steps = windows(duration, first, growth)
     q = truncated(problem, problem.times[0] + steps[0]) if len(steps) > 1 else problem
     hold = [n for n in hold if n in problem.free]
-    q1 = dataclasses.replace(q, free=tuple(n for n in problem.free if n not in hold),
+    rest = [n for n in at_rest(problem) if n not in hold] if hold_rest and start is None else []
+    q0 = dataclasses.replace(q, free=tuple(n for n in problem.free if n not in hold),
                              fixed={**q.fixed, **{n: problem.x0[n] for n in hold}}) if hold else q
+    q1 = _without(q0, rest) if rest else q0
     if start is None:
         res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal,
                        workers=workers)
@@ -141,6 +161,13 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         except Exception as exc:   # the complex's point stands
             log.warning("grow: profile on the first window failed: %s", exc)
     per_window = STEP_ITERATIONS * (2 * len(problem.free) + 2) + 1
+    if rest:   # the rest's variables freed on the first window, from their start values
+        vals = {**{n: problem.x0[n] for n in rest}, **dict(zip(q1.free, map(float, x1)))}
+        q1, x1 = q0, np.array([vals[n] for n in q0.free])
+        r1 = refine(q1, x1, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
+        nfev += r1.nfev   # S stands: the same simulation
+        if np.isfinite(r1.f) and r1.f < S:
+            x1, S = np.asarray(r1.x, float), float(r1.f)
     if start is not None:
         r1 = refine(q1, x1, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
         nfev += r1.nfev
@@ -176,7 +203,16 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         if keep_points:
             trail[-1]["x"] = x.tolist()
     return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0, "unseen": unseen,
-               "retry": retried}
+               "retry": retried, "rest_held": rest}
+
+
+def _without(q, names: Sequence[str]):
+    """q with `names` no longer free: at q's start values (a joint problem's
+    trigger points go together, as its records' own ones follow the first's)."""
+    if isinstance(q, JointProblem):
+        return JointProblem(q.parts, free=[n for n in q.free if n not in names and "@" not in n], x0=q.x0,
+                            name=q.name)
+    return dataclasses.replace(q, free=tuple(n for n in q.free if n not in names))
 
 
 def records_off(q, sim, w, z: float = RETRY_Z) -> list:

@@ -52,7 +52,7 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
                    progress: bool = False, restarts: int = 0, refine_evals: int = 400,
                    uncertainty: bool = False, shrink: bool = False,
                    ladder: Sequence[float] = LADDER, first: float = FIRST, start: str = "auto",
-                   workers: int = 1, executor=None):
+                   hold_rest: bool = False, workers: int = 1, executor=None):
     """The problem (an IdentificationProblem or a joint one) identified over
     a growing window: `max_evals` complex evaluations on the first `first`
     seconds, the profile there, Levenberg-Marquardt over growing windows in
@@ -75,7 +75,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     At the chosen window an identifiable CoR found near its box edge is
     refined again from the edge, kept where f ends lower
     (identification.pipeline.edge_probe; with `uncertainty` and `refine_evals`).
-    `progress`: a bar over the stages (the grown windows, the refinement
+    `hold_rest`: the complex holds what sets the chain at rest at its start
+    values (growing.grow). `progress`: a bar over the stages (the grown windows, the refinement
     and intervals, the shorter windows, the edge probes, each restart), with
     f after each. `workers` (local processes) or `executor` (a Dask
     client's, say): the complex's candidates and the Jacobians' columns side
@@ -98,7 +99,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     t0 = time.time()
     bar = tqdm(total=len(STAGES), desc=f"{problem.name}", unit="stage", leave=False) if progress else None
     once = dict(max_evals=max_evals, refine_evals=refine_evals, uncertainty=uncertainty, shrink=shrink,
-                ladder=ladder, first=first, start=start, tick=_ticker(bar), workers=max(1, int(workers)))
+                ladder=ladder, first=first, start=start, hold_rest=bool(hold_rest), tick=_ticker(bar),
+                workers=max(1, int(workers)))
     try:
         with pooled(problem, workers, executor):
             res = _restarted(problem, seed, journal, int(restarts), once, bar, t0)
@@ -189,8 +191,8 @@ def _safe_f(q, x) -> float:
         return float("inf")
 
 
-def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start, tick,
-          workers):
+def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrink, ladder, first, start, hold_rest,
+          tick, workers):
     """One grown identification (identify_grown without restarts)."""
     t0 = time.time()
     x0 = problem.x0_vector()
@@ -212,7 +214,7 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
         retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start, retry=retry, workers=workers)
+                   start=x_start, retry=retry, workers=workers, hold_rest=hold_rest)
     tick("grown", float(info["windows"][-1]["S_per_sample"]) * problem.samples.size)
     if started is not None:
         info["nfev"] += started["nfev"]

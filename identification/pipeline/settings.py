@@ -10,6 +10,7 @@ expert's TOML file to change them, and the record of what a run used.
     shrink = true         # shorter windows while a CoR is rough or the fit above the noise
     tare = true           # zero errors within 3 sigma of the declared offset taken out
     first_window = 0.3    # s: the complex's window
+    hold_rest = false     # the complex holds the pretension and trigger points at their start values
     steady_evals = 600    # a steady record: the complex's evaluations on the statistics objective
     free = ["e_JA", "e_JR", "e_SW", "e_RW", "v_s", "d", "mu_d", "s_M", "K_P", "K_I"]
 
@@ -45,6 +46,7 @@ class Settings:
     shrink: bool = True
     tare: bool = True
     first_window: float = 0.3
+    hold_rest: bool = False
     steady_evals: int = 600
     free: tuple = field(default=DESIGN)
 
@@ -64,6 +66,7 @@ _RULES = {
     "shrink": (bool, lambda v: True, "true or false"),
     "tare": (bool, lambda v: True, "true or false"),
     "first_window": (float, lambda v: math.isfinite(v) and 0 < v <= 2.0, "a number of seconds in (0, 2]"),
+    "hold_rest": (bool, lambda v: True, "true or false"),
     "steady_evals": (int, lambda v: v >= 1, "an integer of at least 1"),
 }
 
