@@ -46,12 +46,9 @@ def register(sub, common) -> None:
 
 def run(args) -> int:
     from identification.loop.catalogue import CATALOGUE
-    from identification.loop.close_loop import base_from_result, close_loop
+    from identification.loop.on_record import close_loop_record
     from identification.loop.settings import load_loop_settings
-    from identification.objective.problem import from_measurement
-    from identification.pipeline.driver import identify_records
     from identification.pipeline.settings import load_settings
-    from lss_fmu.atomic import write_json_atomic
     from lss_fmu.design import parse_model
     from lss_fmu.measurement import load_measurement
 
@@ -69,29 +66,16 @@ def run(args) -> int:
     settings, loop_settings = load_settings(args.settings), load_loop_settings(args.settings)
     model = parse_model(args.model)
     meas = load_measurement(args.measurement)
-    problem = from_measurement(meas, model, free=settings.free, window=args.window, tare=settings.tare)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(message)s",
                         filename=str(out / "close_loop.log"))
-    base = args.base_result
-    if base is None:   # the front door's identification, as `lss identify` runs it
-        (out / "base").mkdir(exist_ok=True)
-        res = identify_records([meas], model, settings, seed=args.seed, journal=out / "base" / "journal.jsonl",
-                               progress=not args.no_progress, workers=args.workers)
-        write_json_atomic(out / "base" / "result.json", res.to_dict())
-        print(f"base: f = {res.f:.4g} ({res.message})")
-        base = out / "base"
-    x_base = base_from_result(base, problem)
-    sensor = meas.meta.get("sensor") or {}
-    res = close_loop(problem, x_base, effects=effects, rounds=args.rounds, seed=args.seed, out=out,
-                     progress=not args.no_progress, workers=args.workers,
-                     sensor_offset_std=sensor.get("force_offset_std_N"),
-                     noise_std=sensor.get("force_noise_std_N") if args.noise == "declared" else None,
-                     settings=loop_settings)
-    write_json_atomic(out / "result.json", {**res.to_dict(), "settings": {"identify": settings.to_dict(),
-                                                                          "close_loop": loop_settings.to_dict()}})
+    res = close_loop_record(meas, model, out, settings=settings, loop_settings=loop_settings,
+                            base=args.base_result, rounds=args.rounds, effects=effects, window=args.window,
+                            noise=args.noise, seed=args.seed, workers=args.workers, progress=not args.no_progress,
+                            on_base=lambda b: print(f"base: f = {b.f:.4g} ({b.message})"))
     report = write_report(res, out)
+    problem = res.problem
     print(f"{meas.id}: {problem.protocol.name} record, layout {problem.layout}, {len(problem.times)} samples "
           f"({problem.times[-1]:.3g} s)")
     for r in res.rounds:
