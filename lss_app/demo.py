@@ -1,11 +1,12 @@
 """`make demo`: the main job on an embedded default, end to end.
 
 1. simulate the built-in layout 7 (52 carts) with the virtual transducer cart
-   and write one measurement (samples + metadata; the truth goes to a separate
-   answer file);
-2. identify its contact coefficients of restitution with Complex-RF;
-3. close the loop: analyse the residual, trace it to a missing effect, extend
-   the model and report the error before and after.
+   and write one start-stop measurement (samples + metadata; the truth goes to
+   a separate answer file);
+2. identify the ten design variables as `lss identify` does by default;
+3. close the loop on a start-stop of layout 5 with an undeclared effect:
+   analyse the residual, trace it to a missing effect, extend the model and
+   report the error before and after.
 
 The output folder gets a README.md that links the figures and tables of
 every stage. `lss demo --out DIR`; `make demo` runs it into demo_out/.
