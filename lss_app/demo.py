@@ -4,7 +4,7 @@
    and write one start-stop measurement (samples + metadata; the truth goes to
    a separate answer file);
 2. identify the ten design variables as `lss identify` does by default;
-3. close the loop on a start-stop of layout 5 with an undeclared effect:
+3. close the loop on a start-stop of the same sorter with an undeclared effect:
    analyse the residual, trace it to a missing effect, extend the model and
    report the error before and after.
 
