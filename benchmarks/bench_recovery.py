@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from bench_common import hash_sources  # noqa: E402
+from bench_common import ROOT, hash_sources, write_between  # noqa: E402
 from identification.pipeline.campaign import run_campaign  # noqa: E402
 from identification.objective.joint import own  # noqa: E402
 from identification.pipeline.driver import build_problem  # noqa: E402
@@ -137,6 +137,18 @@ def table(rows: list) -> str:
     return "\n".join(lines)
 
 
+def doc_text(entry: dict, source: str) -> str:
+    """The table of a JSON with its summary in words, for docs/recovery_table.md."""
+    sm, rows = entry["summary"], entry["rows"]
+    codes = ", ".join(f"{n} rows of code {c}" for c, n in sm.get("codes", {}).items())
+    return (f"From `{source}` ({entry.get('protocol')}, {entry.get('repeats')} records a measurement, rig seed "
+            f"{entry.get('rig_seed', 'default')}; {codes}).\n\n"
+            f"**{sm['all_three_claimed_within']} of {sm['n']}** measurements with e_JA, e_SW and e_RW claimed and "
+            f"within 0.03; f / f(truth) median {sm['ratio_median']:.3f}; intervals holding the truth: "
+            + ", ".join(f"{s} {sm[s]['interval_covers']} of {sm['n']}" for s in HEADLINE)
+            + f"; {sm['cpu_s_total']:.0f} CPU-s in all.\n\n{table(rows)}")
+
+
 def set_fmu(data: Path):
     """The FMU that made most of the set already in `data` (a rebuild since, e.g.
     by the tests, is another file: the set stays one FMU's), or None."""
@@ -168,9 +180,14 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     ap.add_argument("--no-progress", action="store_true")
     ap.add_argument("--table", action="store_true", help="print the Markdown table of --json and stop")
+    ap.add_argument("--doc", action="store_true",
+                    help="write the table and summary of --json into docs/recovery_table.md and stop")
     args = ap.parse_args(argv)
-    if args.table:
+    if args.table or args.doc:
         entry = json.loads(Path(args.json).read_text())
+        if args.doc:
+            write_between(ROOT / "docs" / "recovery_table.md", entry.get("set", "recovery"), doc_text(entry, args.json))
+            return 0
         print(f"{table(entry['rows'])}\n\n{json.dumps(entry['summary'], indent=1)}")
         return 0
     if args.repeats < 1:
