@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from identification.loop.close_loop import base_from_result  # noqa: E402
-from identification.objective.problem import from_measurement, tared  # noqa: E402
+from identification.objective.problem import from_measurement, weighted_residual  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import symbol  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
@@ -46,7 +46,7 @@ def probe(record: Path, loop_out: Path, model: str = "LW") -> dict:
     w = 1.0 / np.asarray(p.noise, float) ** 2
 
     def S(x, extra=None) -> float:
-        return float(np.sum(tared(p.samples - p.simulate(x, extra), p.tare) ** 2 * w))
+        return weighted_residual(p, p.simulate(x, extra), w)[1]
 
     rows = []
     for i, n in enumerate(p.free):
