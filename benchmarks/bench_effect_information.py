@@ -49,8 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_common import ROOT, write_between  # noqa: E402  (sets one BLAS thread)
 
 import numpy as np  # noqa: E402
-from scipy import optimize, stats  # noqa: E402
 
+from identification.loop import reach  # noqa: E402
 from identification.loop.catalogue import MotorRipple, WheelOutOfRound  # noqa: E402
 from identification.loop.synthetic import TRUTH, effect_case  # noqa: E402
 from identification.objective.jacobian import demean_columns, jacobian  # noqa: E402
@@ -74,12 +74,12 @@ PHASES = np.linspace(0.0, 2.0 * math.pi, 24, endpoint=False)
 
 def threshold(n_values: int, m_effect: int) -> float:
     """The T the loop needs to confirm: Bonferroni at ALPHA over the round, and BIC."""
-    return max(float(stats.chi2.isf(ALPHA / ROUND_HYPOTHESES, Q)), Q * math.log(n_values) + 2.0 * math.log(m_effect))
+    return reach.threshold(n_values, ROUND_HYPOTHESES, m_effect, Q)
 
 
 def lambda_90(c: float) -> float:
     """The noncentrality at which chi2_Q exceeds c with probability 0.9."""
-    return float(optimize.brentq(lambda lam: stats.ncx2.sf(c, Q, lam) - 0.9, 1e-6, 1e5))
+    return reach.lambda_90(c, Q)
 
 
 def projector(J: np.ndarray, w: np.ndarray):

@@ -60,6 +60,7 @@ def write_report(res, out: Path) -> Path:
     for rnd in res.rounds:
         lines += [f"## Round {rnd.number}: {getattr(rnd, 'outcome', '') or 'verdict'}", "", rnd.verdict + ".", ""]
         lines += evidence_section(rnd)
+        lines += reach_section(rnd)
         fig = ranking_figure(rnd, out / f"round{rnd.number}_attribution")
         lines += ["### Attribution (orders the candidates)", "",
                   "| effect | best hypothesis | share of f, linear (beyond base) | linear, alone | "
@@ -89,6 +90,23 @@ def write_report(res, out: Path) -> Path:
 
 def _g(x, fmt=".3g") -> str:
     return "-" if x is None else format(float(x), fmt)
+
+
+def reach_section(rnd) -> list:
+    """What the record can reveal of each effect (identification.loop.reach)."""
+    reaches = getattr(rnd, "reach", None) or []
+    if not reaches:
+        return []
+    lines = ["### What this record can reveal", "",
+             "The smallest size the tests above confirm in 90 % of records, from the information the record "
+             "carries beyond the base's parameters (median over the effect's places, pitches and phases; the "
+             "most favourable), against the size the effect reaches in service:", "",
+             "| effect | a_90, median | most favourable | plausible | shows in | visible |",
+             "|---|---|---|---|---|---|"]
+    for r in reaches:
+        lines.append(f"| {r.name} | {r.size_text(r.typical)} | {r.size_text(r.best)} | {r.size_text(r.plausible)} | "
+                     f"{100 * r.share:.0f} % | {'yes' if r.visible else 'no'} |")
+    return lines + [""]
 
 
 def evidence_section(rnd) -> list:

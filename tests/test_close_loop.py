@@ -107,6 +107,19 @@ def test_clean_record_nothing_confirmed(fmu_file, seed, transducer):
     assert rnd.tests and all(not t.supported for t in rnd.tests)
     _evidence_reported(rnd)
     assert float(np.max(rnd.excess.ratio)) < 1.5
+    _reach_reported(rnd)
+
+
+def _reach_reported(rnd) -> None:
+    """Every effect with a size is judged (identification.loop.reach), and the
+    verdict names the plausible ones the record cannot reveal, and only those."""
+    sized = {n for n, e in catalogue.CATALOGUE.items() if e.PLAUSIBLE is not None}
+    assert {r.effect for r in rnd.reach} == sized
+    assert all(r.best <= r.typical and r.threshold > 0 for r in rnd.reach)
+    unseen = [r for r in rnd.reach if not r.visible]
+    assert ("cannot reveal" in rnd.verdict) == bool(unseen), rnd.verdict
+    assert all(r.name in rnd.verdict for r in unseen)
+    assert len(rnd.to_dict()["reach"]) == len(rnd.reach)
 
 
 def test_gain_only_sensor_error_is_a_sensor_fault(fmu_file):

@@ -48,11 +48,18 @@ def test_an_undeclared_runout_is_found_on_a_start_stop(with_runout, tmp_path):
     assert abs(amp / true_amp - 1) < 0.1, (amp, true_amp)
     assert rnd.f_extended < 0.7 * rnd.f_base
     assert (tmp_path / "base" / "result.json").is_file() and (tmp_path / "result.json").is_file()
+    # what the record can reveal (identification.loop.reach): an effect it confirmed is not below the
+    # smallest size it reveals in the most favourable phase
+    order = str(int(truth["effects.wheel_oor.order"]))
+    lobes = next(r for r in rnd.reach if r.effect == "wheel_oor" and r.kind.startswith(order))
+    assert lobes.best <= amp, (lobes.best, amp)
 
 
 def test_a_clean_start_stop_confirms_nothing(clean, tmp_path):
     res = close_loop_record(clean, "LW", tmp_path, settings=BASE, loop_settings=LOOP, rounds=1)
     assert res.found == [], res.verdict
+    unseen = [r for r in res.rounds[0].reach if not r.visible]
+    assert ("cannot reveal" in res.verdict) == bool(unseen), res.verdict
 
 
 def test_a_bad_noise_choice_is_refused_before_anything_runs(clean, tmp_path):

@@ -63,6 +63,8 @@ class HypothesisScore:
     hypothesis: Hypothesis = field(repr=False)
     share_fit: Optional[float] = None   # share of f removed when fitted through the FMU (candidates.rescore)
     notes: list = field(default_factory=list)   # probes dropped as not identifiable, and why
+    # the probes' Fisher information beyond the base columns, in the noise's metric (noise_w given)
+    information: Optional[np.ndarray] = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "hypothesis": self.label, "share": self.share, "share_fit": self.share_fit,
@@ -91,8 +93,11 @@ class Attribution:
 
 def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
               effects: Optional[Sequence[str]] = None, base_columns: bool = True,
-              progress: bool = False) -> Attribution:
-    """Score every hypothesis of every effect (in `effects`, default all)."""
+              progress: bool = False, noise_w: Optional[np.ndarray] = None) -> Attribution:
+    """Score every hypothesis of every effect (in `effects`, default all).
+    With `noise_w` (1 / sigma^2 per channel) each score also carries its
+    probes' Fisher information beyond the base columns (what the record can
+    reveal of the effect: identification.loop.reach)."""
     x = np.asarray(x, float)
     sim0 = problem.simulate(x)
     r = problem.samples - sim0
@@ -109,6 +114,7 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
     _, f_base = _lsq(r, [], w)
     J = [demean_columns(g, demean) for g in one_sided_jacobian(problem, x, sim0)] if base_columns else []
     _, f_J = _lsq(r, J, w)
+    beyond = _complement(J, noise_w) if noise_w is not None else None
     chosen = [CATALOGUE[e] for e in (effects or CATALOGUE)]
     todo = [(e, h) for e in chosen for h in e.hypotheses(ctx)]
     bar = None
@@ -124,6 +130,8 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
             failed.append({"effect": effect.name, "hypothesis": hyp.label, "error": str(exc)[:300]})
             continue
         scores.append(_score(effect, hyp, G, r, J, w, f_base, f_J, ctx, taken))
+        if beyond is not None:
+            scores[-1].information = beyond(G)
     if bar is not None:
         bar.close()
     best = {}
@@ -132,6 +140,26 @@ def attribute(problem: IdentificationProblem, x: Sequence[float], ctx: Context,
             best[s.effect] = s
     ranking = sorted(best.values(), key=lambda s: -s.share)
     return Attribution(f_base, f_J, ranking, scores, J, failed)
+
+
+def _complement(J: list, w: np.ndarray):
+    """G -> G' W G of the columns G projected off the span of J in the metric w
+    per channel (the Fisher information of G's coefficients with the base
+    free, for white noise of variance 1 / w)."""
+    sw = np.sqrt(np.asarray(w, float))
+    U = np.zeros((0, 0))
+    if J:
+        U, sv, _ = np.linalg.svd(np.stack([(g * sw).ravel() for g in J], axis=1), full_matrices=False)
+        U = U[:, sv > 1e-10 * sv[0]] if sv.size and sv[0] > 0 else U[:, :0]   # a dead column spans nothing
+
+    def info(G: list) -> np.ndarray:
+        A = np.stack([(np.asarray(g, float) * sw).ravel() for g in G], axis=1)
+        norm = np.sum(A * A, axis=0)
+        if U.size:
+            A = A - U @ (U.T @ A)
+        A[:, np.sum(A * A, axis=0) <= 1e-12 * norm] = 0.0   # what is left is round-off: nothing beyond J
+        return A.T @ A
+    return info
 
 
 def sensitivity_signatures(problem, x, sim0, hyp: Hypothesis, bar) -> list:

@@ -85,9 +85,24 @@ class Effect:
     # the base's CoRs take up so much of it that its fit with the base held says little
     # (identification.loop.candidates: then fitted with the base over growing windows)
     ABSORBED = False
+    # the size this effect reaches on a sorter in service, the size worth finding (in `unit`); the loop
+    # says when a record cannot reveal it (identification.loop.reach). None: judged otherwise
+    PLAUSIBLE: Optional[float] = None
+    STATIONARY = True      # it acts all the time the chain runs (not only where a cart passes a place)
 
     def hypotheses(self, ctx: Context) -> list:
         raise NotImplementedError
+
+    def directions(self, hyp: Hypothesis) -> Optional[np.ndarray]:
+        """The effect's configurations at unit size as rows of its probes'
+        coefficients (each phase a row), for what a record can reveal
+        (identification.loop.reach); None where the effect has no size."""
+        return np.ones((1, 1)) if len(hyp.probes) == 1 and self.PLAUSIBLE is not None else None
+
+    def kind(self, hyp: Hypothesis) -> str:
+        """Which kind of the effect a hypothesis is, where the kinds differ in
+        what a record reveals (a runout's lobes); '' for one kind."""
+        return ""
 
     def extension(self, hyp: Hypothesis, coef: np.ndarray) -> Extension:
         raise NotImplementedError
@@ -110,6 +125,19 @@ class WheelOutOfRound(Effect):
     PROBE = 1e-4           # m, divided by the order: small, the wheel contact is stiff and nonlinear
     ORDERS = (1, 2, 3)     # eccentric, oval, three-lobed
     PAIRS = ((0.0, 0.0), (0.5 * math.pi, 0.5 * math.pi), (0.0, 0.5 * math.pi), (math.pi, 0.5 * math.pi))
+    PLAUSIBLE = 1e-4       # m: a worn or badly cast tyre's runout, a third of what unloads a wheel at 3 m/s
+    PHASE_GRID = 8         # phases per wheel for what a record can reveal
+
+    def directions(self, hyp):
+        """Both wheels at unit amplitude, each at PHASE_GRID phases: the probe
+        coefficients whose sides() are (cos pl, sin pl, cos pr, sin pr)."""
+        ph = np.linspace(0.0, 2.0 * math.pi, self.PHASE_GRID, endpoint=False)
+        pl, pr = (a.ravel() for a in np.meshgrid(ph, ph))
+        lc, ls, rc, rs = np.cos(pl), np.sin(pl), np.cos(pr), np.sin(pr)
+        return np.column_stack([rc, ls, 0.5 * (lc - rc + rs - ls), 0.5 * (rs - ls - lc + rc)])
+
+    def kind(self, hyp):
+        return hyp.label   # "1 lobe", "2 lobes", ...
 
     def hypotheses(self, ctx):
         out = []
@@ -155,6 +183,8 @@ class TrackBump(Effect):
     name, title, unit = "track_bump", "track irregularity at an element joint", "m"
     PROBE = 1e-3
     LENGTHS = (0.1, 0.18, 0.3)   # m
+    PLAUSIBLE = 1e-3             # m: a rail joint's step at the end of its alignment tolerance
+    STATIONARY = False           # felt where a cart passes the joint
 
     def hypotheses(self, ctx):
         # every cart passes every joint, the fit decides
@@ -190,6 +220,7 @@ class JointClearance(Effect):
     name, title, unit = "joint_clearance", "clearance in the cart-to-cart joints", "m"
     RATIO = 1.5                                   # between rungs
     GAPS = tuple(3e-7 * 1.5 ** k for k in range(23))   # 0.3 um .. 2.2 mm on rungs of RATIO (the FMU: 5 mm)
+    PLAUSIBLE = 5e-5       # m: a worn joint's play, a fraction of the pretension's stretch per joint (0.1-0.44 mm)
 
     def hypotheses(self, ctx):
         return [Hypothesis(self.name, f"play of {1e6 * g:.3g} um in every joint",
@@ -234,6 +265,13 @@ class MotorRipple(Effect):
     COHERENT = 1.2                # m, motor plus plate length
     LINE_PROBE = 5.0              # N
     LINE_STEPS = (-0.5, -0.25, 0.0, 0.25, 0.5)   # of the line's resolution cell, relative to its order
+    PLAUSIBLE = 50.0              # N: a linear motor's cogging, 12 % of its 400 N thrust
+    PHASES = 24                   # for what a record can reveal
+
+    def directions(self, hyp):
+        """Unit amplitude at PHASES phases: (cos phi, sin phi) on the cosine and sine probes."""
+        ph = np.linspace(0.0, 2.0 * math.pi, self.PHASES, endpoint=False)
+        return np.column_stack([np.cos(ph), np.sin(ph)])
 
     @classmethod
     def pitches(cls) -> np.ndarray:
@@ -286,6 +324,7 @@ class MotorRipple(Effect):
 class Resistance(Effect):
     name, title, unit = "resistance", "velocity-dependent running resistance", "N.s/m"
     PROBE = 40.0
+    PLAUSIBLE = 2.0        # N.s/m per cart: 3-6 N more per cart at 1.5-3 m/s, beside 6.6 N of rolling
 
     def hypotheses(self, ctx):
         return [Hypothesis(self.name, "viscous", [Probe("c1", {"effects.resistance.c1": self.PROBE}, self.PROBE)])]
@@ -386,6 +425,7 @@ class TransducerMass(Effect):
     # a quarter heavier cart 7 (one rates-benchmark record): held at the base's CoRs the fitted factor lowered S
     # per sample from 23.5 to 21.3 only, and a sensor gain took 71 % of the misfit instead
     ABSORBED = True
+    PLAUSIBLE = 0.15       # the transducer cart 15 % heavier than the others (its instruments)
 
     def hypotheses(self, ctx):
         return [Hypothesis(self.name, "transducer cart heavier or lighter",

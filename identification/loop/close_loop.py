@@ -20,6 +20,9 @@ candidate that cannot be built or fitted (a degenerate fit, bounds outside
 the FMU's range, a failed simulation) is dropped with its reason; the round
 goes on. A second round starts from the extended model.
 
+Each round also states which effects of a size they reach in service the
+record cannot reveal at all (identification.loop.reach), in its verdict.
+
 The pieces: identification.pipeline.base_polish (the base at its own optimum),
 identification.loop.candidates (rescore and the tests of each candidate),
 identification.loop.verdict, identification.loop.settle (a provisional effect at the
@@ -56,6 +59,7 @@ from .locate import analyse, catalogue_bands, context, localise, signals_at
 from .loop_result import CloseLoopResult, Round
 from ..objective.noise import excess, noise_levels
 from ..objective.problem import IdentificationProblem, nrmsd, tared
+from .reach import reach, unseen_text
 from .ripple_line import ripple_lines
 from .settings import LoopSettings
 from .verdict import decide
@@ -132,6 +136,10 @@ def close_loop(problem: IdentificationProblem, x_base: Optional[Sequence[float]]
         base = dataclasses.replace(rnd.problem_extended, x0=rnd.problem_extended.values(rnd.x_extended))
         x = np.asarray(rnd.x_extended, float)
     settle_provisional(result_rounds, still_needed)
+    for rnd in result_rounds:   # what the record could not have shown, whatever the verdict
+        unseen = unseen_text(rnd.reach)
+        if unseen:
+            rnd.verdict += "; " + unseen
     return CloseLoopResult(problem, np.asarray(x_base, float), result_rounds, time.time() - t0, grown)
 
 
@@ -206,13 +214,14 @@ def _attempt(base, x, number, effects, settings: LoopSettings, run: Run, *, last
         ripple = CATALOGUE["motor_ripple"]
         ctx.ripple_lines = ripple_lines(r_b, s, (ripple.P_MIN, ripple.P_MAX))
     cache = out / f"round{number}_attribution.json" if out else None
-    att = attribute(base, x, ctx, effects=effects, progress=run.progress)
+    att = attribute(base, x, ctx, effects=effects, progress=run.progress, noise_w=w)
     if cache:
         write_json_atomic(cache, att.to_dict())
     counts = hypothesis_counts(att)
     m = max(1, sum(counts.values()))
     rnd = Round(number, f_base, H, att, "", x_base=x, residual=ra, base_problem=base, noise=noise, excess=exc,
-                base_refined=base_refined, S_base=S_b, hypotheses=m)
+                base_refined=base_refined, S_base=S_b, hypotheses=m,
+                reach=reach(att, r_b.size, m, counts, float(base.times[-1] - base.times[0])))
     fits, dropped = rescore(base, x, att, f_base, n=max(RESCORE, settings.candidates), evals=settings.fit_evals,
                             seed=seed, out=out, number=number)
     rnd.dropped = dropped

@@ -110,6 +110,7 @@ class Round:
                                  # only if a later round's model (with it) reaches the noise
     verdict_if_confirmed: str = field(default="", repr=False)
     rivalry: Optional[dict] = None   # two candidates that both passed, compared (identification.loop.rivals)
+    reach: list = field(default_factory=list)   # what the record can reveal of each effect (identification.loop.reach)
 
     @property
     def evidence(self) -> Optional[CandidateTest]:
@@ -143,7 +144,7 @@ class Round:
             "excess": None if self.excess is None else self.excess.to_dict(),
             "tests": [t.to_dict() for t in self.tests],
             "departures": [d.to_dict() for d in self.departures],
-            "dropped": self.dropped, "rivalry": self.rivalry,
+            "dropped": self.dropped, "rivalry": self.rivalry, "reach": [r.to_dict() for r in self.reach],
             "attribution": self.attribution.to_dict(),
         }
 
