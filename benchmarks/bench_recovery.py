@@ -113,13 +113,13 @@ def summary(rows: list) -> dict:
 
 
 def table(rows: list) -> str:
-    """Markdown: per measurement f / f(truth), each CoR's error with its
-    interval's sd (n.i.: reported not identifiable), whether e_JA, e_SW,
-    e_RW's intervals hold the truth, the window used (and the ones tried
-    before it), CPU."""
-    head = ("| meas | layout | f / f(truth) | e_JA err (sd) | e_SW err (sd) | e_RW err (sd) | e_JR err | intervals "
-            "cover (JA/SW/RW) | window s | CPU s |")
-    lines = [head, "|" + "---|" * 10]
+    """Markdown: per measurement the true e_JA, e_SW, e_RW, f / f(truth), each
+    CoR's error with its interval's sd (n.i.: reported not identifiable),
+    whether e_JA, e_SW, e_RW's intervals hold the truth, the window used (and
+    the ones tried before it), CPU."""
+    head = ("| meas | layout | true JA/SW/RW | f / f(truth) | e_JA err (sd) | e_SW err (sd) | e_RW err (sd) | "
+            "e_JR err | intervals cover (JA/SW/RW) | window s | CPU s |")
+    lines = [head, "|" + "---|" * 11]
     for q in rows:
         def cell(s, sd=True):
             e, iv = q[s]["error"], q[s]["interval"] or {}
@@ -131,7 +131,8 @@ def table(rows: list) -> str:
         win = "" if q.get("window_s") is None else f"{q['window_s']:.2g}"
         if len(tried) > 1:
             win += " (" + ", ".join(f"{w:.2g}" for w in tried[:-1]) + ")"
-        lines.append(f"| {q['number']} | {str(q['layout']).replace('layout', '')} | {q['ratio']:.3f} | "
+        true = "/".join(f"{q[s]['true']:.2f}" for s in HEADLINE)
+        lines.append(f"| {q['number']} | {str(q['layout']).replace('layout', '')} | {true} | {q['ratio']:.3f} | "
                      f"{cell('e_JA')} | {cell('e_SW')} | {cell('e_RW')} | {cell('e_JR', False)} | {cov} | {win} | "
                      f"{q['cpu_s'] or 0:.0f} |")
     return "\n".join(lines)

@@ -12,7 +12,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
-from bench_recovery import hit, main, summary  # noqa: E402
+from bench_recovery import doc_text, hit, main, summary  # noqa: E402
 
 
 def test_a_small_recovery_table_from_the_campaign(tmp_path, fmu_file):
@@ -48,3 +48,19 @@ def test_a_hit_is_claimed_and_within():
     assert hit(row(0.02), "e_RW") and not hit(row(0.04), "e_RW") and not hit(row(0.0, False), "e_RW")
     s = summary([row(0.02), row(0.0, False), row(0.04)])
     assert s["all_three_claimed_within"] == 1 and s["e_RW"]["within"] == 2 and s["e_RW"]["claimed_within"] == 1
+
+
+def test_the_doc_table_shows_the_truth_and_counts_only_claimed_hits():
+    def cor(true, err, ident=True):
+        return {"true": true, "error": err, "identifiable": ident, "covers": abs(err) < 0.02,
+                "interval": {"sd": 0.01}}
+
+    def row(n, err, ident=True):
+        return {"number": n, "layout": "layout2", "ratio": 1.0, "cpu_s": 10.0, "window_s": 2.5, "windows": [2.5],
+                "e_JA": cor(0.31, 0.001), "e_SW": cor(0.72, -0.002), "e_RW": cor(0.45, err, ident),
+                "e_JR": cor(0.5, 0.2, False)}
+    rows = [row(5, 0.01), row(6, 0.01, False), row(7, 0.05)]
+    text = doc_text({"summary": summary(rows), "rows": rows, "protocol": "start-stop", "repeats": 3,
+                     "rig_seed": 7}, "x.json")
+    assert "**1 of 3**" in text and "rig seed 7" in text
+    assert text.count("0.31/0.72/0.45") == 3 and "+0.010 n.i." in text

@@ -13,8 +13,9 @@ records when its noncentrality a^2 d'Fd reaches lambda_90:
     a_90 = sqrt(lambda_90 / d'F d),   P(chi2_q(lambda_90) > threshold) = 0.9.
 
 The white-noise test is the most lenient the loop applies (a correlated
-residual only raises its threshold), so below a_90 an effect cannot be
-confirmed from this record, whatever the optimiser. An effect whose
+residual only raises its threshold), so below a_90 fewer than 9 records in
+10 of this kind confirm the effect, whatever the optimiser (as far as the
+record's answer is linear in the effect near the base). An effect whose
 size is a ladder of hypotheses (a joint's play: the chain's answer is far
 from linear in it) is reached at the smallest rung whose own signature
 passes. Per effect and kind (a runout's lobes): the median over its
