@@ -325,15 +325,15 @@ def rate_interval(k: int, n: int, level: float = 0.95) -> list:
     return [float(ci.low), float(ci.high)]
 
 
-def summarise(results: list) -> dict:
-    """Rates from the stored rows: per family and amplitude the records, hits, wrong effects and the
-    exact 95 % interval of the hit rate; the smallest amplitude found in >= 90 % of >= 5 records with
-    the lower end of its interval (what the records guarantee); the clean records' false alarms with
-    the upper end of theirs."""
+def summarise(results: list, families: dict = None, budget: dict = None) -> dict:
+    """Rates from the stored rows: per family (default FAMILIES: name -> (unit, amplitudes, what)) and
+    amplitude the records, hits, wrong effects and the exact 95 % interval of the hit rate; the smallest
+    amplitude found in >= 90 % of >= 5 records with the lower end of its interval (what the records
+    guarantee); the clean records' false alarms with the upper end of theirs."""
     clean = [r for r in results if r["kind"] == "clean" and "error" not in r]
     false = [r["id"] for r in clean if r["found"]]
     det = {}
-    for fam, (unit, amps, what) in FAMILIES.items():
+    for fam, (unit, amps, what) in (FAMILIES if families is None else families).items():
         target = "sensor" if fam.startswith("sensor") else "wheel_oor" if fam.startswith("wheel_oor") else fam
         rows = []
         for ia, a in enumerate(amps):
@@ -362,15 +362,16 @@ def summarise(results: list) -> dict:
                       "false_rate_upper": rate_interval(len(false), len(clean))[1],
                       "outcomes": {o: sum(r["outcome"] == o for r in clean) for o in
                                    ("confirmed", "undecided", "not in the catalogue", "nothing significant")},
-                      "by_source": {s: sum(r["source"] == s for r in clean) for s in ("synthetic", "rig")},
+                      "by_source": {s: sum(r["source"] == s for r in clean) for s in
+                                    sorted({r["source"] for r in clean} | {"synthetic", "rig"})},
                       "protocols": sorted({r.get("protocol", "release") for r in clean}),
                       "layouts": sorted({str(r.get("layout")) for r in clean})},
             "detection": det, "out_of_catalogue": ooc, "errors": errors,
             "cpu_s": {"total": float(sum(cpu)), "median": float(np.median(cpu)) if cpu else None},
-            "budget": BUDGET}
+            "budget": BUDGET if budget is None else budget}
 
 
-def figure(summary: dict, path: Path) -> None:
+def figure(summary: dict, path: Path, what: str = "release transient, layout 7") -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -399,7 +400,7 @@ def figure(summary: dict, path: Path) -> None:
         ax.axis("off")
     c = summary["clean"]
     code = summary.get("code")
-    fig.suptitle(f"Closed loop: detection rate against amplitude (release transient, layout 7); clean records: "
+    fig.suptitle(f"Closed loop: detection rate against amplitude ({what}); clean records: "
                  f"{len(c['false_confirmations'])} false confirmation(s) in {c['records']}"
                  + (f"\n{code['of_current']} of {code['rows']} rows on code {code['current']}"
                     + (" (only they counted)" if code.get("counted") == "current only" else "") if code else ""),

@@ -295,9 +295,13 @@ def _as_built_track(layout: str, seed: int, out_dir: Optional[Path]) -> tuple:
 def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir: Optional[Path] = None,
               lap_seconds: Optional[float] = None, extra_params: Optional[Mapping] = None,
               effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-              artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0) -> Case:
+              artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0,
+              effect_values: Optional[Mapping[str, float]] = None) -> Case:
     """The definition of measurement `number` of a set, drawn from the seed,
     measured with `protocol` (rig_protocol).
+
+    `effect_values`: FMU values of the drawn `effects` set instead of drawn
+    (rig_effects.set_values: an effect's size for a benchmark).
 
     `repeat` k > 0: the same sorter (every drawn value the same) started from
     rest once more, after the chain stopped somewhere else: another parking
@@ -398,9 +402,13 @@ def make_case(set_name: str, number: int, seed: int = DEFAULT_SEED, answers_dir:
         geom = track if geometry is None else Track(geometry)   # the track the FMU runs (joints of the as-built)
         eff = E.effects_truth(effects, eseed, geom, transducer=idx, stream=_layout_index(layout),
                               pretension=NOMINAL_PRETENSION[layout])
+        if effect_values:
+            eff = E.set_values(eff, effect_values)
         for d in eff.values():
             params.update(d["parameters"])
         arts = E.draw_artefacts(artefacts, eseed, L, stream=_layout_index(layout), avoid_s=s_M)
+    elif effect_values:
+        raise ValueError(f"effect values {', '.join(sorted(effect_values))} given, but no effect is switched on")
     if extra_params:
         params.update(extra_params)
     return Case(set_name, number, seed, layout, layout_fmu, L, N, v_nom, d_nom, d_factor, s_M_nom, truth, cor,
@@ -608,14 +616,15 @@ def run_measurement(set_name: str, number: int, out: Union[str, Path], sim, seed
                     lap_seconds: Optional[float] = None, sensor: Optional[SensorModel] = None,
                     fmu_sha: str = "", overwrite: bool = False, extra_params: Optional[Mapping] = None,
                     effects: Sequence[str] = (), effect_seed: Optional[int] = None,
-                    artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0) -> dict:
+                    artefacts: Sequence[str] = (), protocol: str = "steady", repeat: int = 0,
+                    effect_values: Optional[Mapping[str, float]] = None) -> dict:
     """Simulate one measurement and write DIR/mNN and DIR/answers/mNN/truth.json
-    (`repeat`: make_case's)."""
+    (`repeat`, `effect_values`: make_case's)."""
     out = Path(out)
     sensor = sensor or SensorModel()
     t0, c0 = time.perf_counter(), time.process_time()
     case = make_case(set_name, number, seed, answers_dir(out), lap_seconds, extra_params, effects, effect_seed,
-                     artefacts, protocol, repeat)
+                     artefacts, protocol, repeat, effect_values)
     samples, acq, _ = simulate_case(case, sim, sensor, lap_seconds)
     t_sim_wall, t_sim_cpu = time.perf_counter() - t0, time.process_time() - c0
     meta = meta_for(case, sensor, acq["n_samples"], acq["full_lap"])

@@ -305,6 +305,28 @@ def effects_truth(names, seed: int, layout, transducer: Optional[int] = None, st
     return out
 
 
+def set_values(effects: dict, values: Mapping[str, float]) -> dict:
+    """The drawn effects (effects_truth) with some of their FMU values set by
+    the caller instead (a benchmark setting an effect's size: the phases,
+    places and pitches stay drawn); the truth lists them under "set". A name
+    that no drawn effect has is refused."""
+    values = dict(values or {})
+    owners = {k: name for name, d in effects.items() for k in d["parameters"]}
+    unknown = sorted(set(values) - set(owners))
+    if unknown:
+        raise ValueError(f"effect value {unknown[0]!r}: not a parameter of the drawn effects "
+                         f"({', '.join(sorted(owners)) or 'none drawn'})")
+    out = {name: {**d, "parameters": dict(d["parameters"])} for name, d in effects.items()}
+    for k, v in values.items():
+        d = out[owners[k]]
+        d["parameters"][k] = type(d["parameters"][k])(v)
+        d["set"] = sorted(set(d.get("set", [])) | {k})
+    if "wheel_oor" in out and "amplitude_times_order2_m" in out["wheel_oor"]:   # derived from the set values
+        w = out["wheel_oor"]["parameters"]
+        out["wheel_oor"]["amplitude_times_order2_m"] = w["effects.wheel_oor.amplitude"] * w["effects.wheel_oor.order"] ** 2
+    return out
+
+
 def draw_effects(names, seed: int, layout, transducer: Optional[int] = None, stream: int = 0,
                  pretension: Optional[float] = None) -> dict:
     """The FMU parameters that switch on the named effects, drawn from the seed

@@ -346,3 +346,27 @@ def test_measurement_with_effects_looks_like_any_other(tmp_path):
     t["fmu_parameters"].update(t["effects"]["sensor"]["parameters"])
     (hidden / "answers" / "m20" / "truth.json").write_text(json.dumps(t))
     assert "effects.sensor." in rig._existing(hidden, 20, "recovery", rig.DEFAULT_SEED, sha, fx)
+
+
+def test_a_benchmark_sets_an_effects_size_and_the_truth_says_so():
+    """effect_values replace drawn values only: the phases, places and the
+    transducer cart stay as drawn, the truth lists what was set, and a value of
+    an effect not switched on is refused naming it."""
+    drawn = rig.make_case("recovery", 5, effects=["wheel_oor"], effect_seed=4, protocol="start-stop",
+                          lap_seconds=1.2)
+    sized = rig.make_case("recovery", 5, effects=["wheel_oor"], effect_seed=4, protocol="start-stop",
+                          lap_seconds=1.2, effect_values={"effects.wheel_oor.amplitude": 5e-5,
+                                                          "effects.wheel_oor.order": 2})
+    p0, p1 = drawn.effects["wheel_oor"]["parameters"], sized.effects["wheel_oor"]["parameters"]
+    assert p1["effects.wheel_oor.amplitude"] == 5e-5 and p1["effects.wheel_oor.order"] == 2
+    assert sized.fmu_params["effects.wheel_oor.amplitude"] == 5e-5
+    for k in ("effects.wheel_oor.phase_left", "effects.wheel_oor.phase_right"):
+        assert p1[k] == p0[k]
+    assert sized.effects["wheel_oor"]["set"] == ["effects.wheel_oor.amplitude", "effects.wheel_oor.order"]
+    assert sized.effects["wheel_oor"]["amplitude_times_order2_m"] == pytest.approx(2e-4)
+    assert sized.transducer == drawn.transducer and "set" not in drawn.effects["wheel_oor"]
+    with pytest.raises(ValueError, match="effects.motor_ripple.amplitude"):
+        rig.make_case("recovery", 5, effects=["wheel_oor"], effect_seed=4,
+                      effect_values={"effects.motor_ripple.amplitude": 50.0})
+    with pytest.raises(ValueError, match="no effect is switched on"):
+        rig.make_case("recovery", 5, effect_values={"effects.wheel_oor.amplitude": 5e-5})
