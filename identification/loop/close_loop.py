@@ -20,8 +20,8 @@ candidate that cannot be built or fitted (a degenerate fit, bounds outside
 the FMU's range, a failed simulation) is dropped with its reason; the round
 goes on. A second round starts from the extended model.
 
-Each round also states which effects of a size they reach in service the
-record cannot reveal at all (identification.loop.reach), in its verdict.
+Each round's verdict also names the effects that, at the size they reach in
+service, the record cannot reveal (identification.loop.reach).
 
 The pieces: identification.pipeline.base_polish (the base at its own optimum),
 identification.loop.candidates (rescore and the tests of each candidate),
