@@ -25,7 +25,7 @@ of other code).
     .venv/bin/python benchmarks/bench_close_loop_start_stop.py report [--figure FILE]
 
 Cost: one case is a base identification and a round of the loop on 1.2 s,
-about 300 CPU-s on layout 7 and 650 on layout 2 (52 and 171 carts); layout 3
+about 300 CPU-s on layout 7 and 670 on layout 2 (52 and 169 carts); layout 3
 (685 carts) about ten times layout 7's.
 """
 from __future__ import annotations
