@@ -137,6 +137,7 @@ typedef struct ChainState {
     double *load;                     /* [N] the item mass each cart carries, kg */
     double port[2 * LOAD_PORTS];      /* each item port's (cart, mass) as last applied */
     double E_items;                   /* mechanical energy the item ports changed, J */
+    double relax_rate;                /* 1/s: every velocity decays at this rate (only while relaxing at rest) */
 } ChainState;
 
 /* Right-hand-side code paths (solver.vector_path): the scalar one runs

@@ -7,9 +7,13 @@
  * gains or mu_roll: one equilibrium serves every such value (an FMU state can
  * keep it).
  *
- * The walk is viscous: every velocity decays at RELAX_RATE, applied after each
- * RELAX_INTERVAL of free motion. A schedule fixed in time makes the chain at
- * rest a smooth function of where it stands and of its pretension. Kinetic
+ * The walk is viscous: every velocity decays at RELAX_RATE, a damping term in
+ * the equations of motion while relaxing, for a time fixed in advance. That
+ * makes the chain at rest a smooth function of where it stands and of its
+ * pretension, and leaves the solver its own steps: applied between fixed
+ * intervals instead, the damping bounded every step to the interval (1 ms,
+ * about half the joints' stability limit) and restarted the solver's first
+ * stage at each application. Kinetic
  * damping (zero every velocity when the kinetic energy passes a peak) settles
  * as fast, but which look sees the peak is decided by the state: half a
  * millimetre further along the track quenches at another look, the start
@@ -22,11 +26,10 @@
 #include "rhs_shared.h"
 #include "chain_simd.h"
 
-#define RELAX_INTERVAL 0.001    /* s of free motion between two applications of the damping */
 #define RELAX_RATE 10.0         /* 1/s: about critical for the slowest modes of a loop at rest; after 1 s of
                                    it the forces of a chain left at rest drift by under 3 N (layouts 1-7) */
 #define RELAX_COR 0.5           /* the contact damping during relaxation */
-#define RELAX_TOL_MAX 1e-3      /* the solver's tolerance while relaxing: ten times the run's, at most this */
+#define RELAX_TOL_MAX 1e-3      /* the solver's tolerance while relaxing: the run's, at most this */
 
 /* Every velocity times k (the velocities are state: the solver's last stage and the vector path's
  * copy no longer hold). */
@@ -51,15 +54,13 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     m->drive_mode = DRIVE_INTERNAL;   /* drive off: no external thrust either */
     st->v_ref = st->Kp = st->Ki = 0.0;
     double tol = c->ode.tol;
-    c->ode.tol = 10.0 * tol < RELAX_TOL_MAX ? 10.0 * tol : RELAX_TOL_MAX;  /* an equilibrium, not a trajectory */
+    /* the run's tolerance, not a looser one: the steps would then sit at the joints' stability limit, and
+       the error control's noise there leaves the chain about 1 N from where a finer run relaxes it */
+    c->ode.tol = tol < RELAX_TOL_MAX ? tol : RELAX_TOL_MAX;
     damp(c, 0.0);
-    int failed = 0;
-    for (double t = 0.0; t < T && !failed;) {
-        double next = t + RELAX_INTERVAL < T ? t + RELAX_INTERVAL : T;
-        failed = chain_step(c, next, err, errlen);
-        damp(c, exp(-RELAX_RATE * (next - t)));
-        t = next;
-    }
+    st->relax_rate = RELAX_RATE;
+    int failed = chain_step(c, T, err, errlen);
+    st->relax_rate = 0.0;
     damp(c, 0.0);
     c->ode.tol = tol;
     memcpy(m->law, saved, sizeof saved);

@@ -36,7 +36,15 @@ static int update_contact_memory(Chain *c) {
     return changed;
 }
 
-static void rhs(void *ctx, double t, const double *y, double *dy) { chain_rhs(ctx, t, y, dy); }
+static void rhs(void *ctx, double t, const double *y, double *dy) {
+    Chain *c = ctx;
+    chain_rhs(c, t, y, dy);
+    double k = c->st.relax_rate;
+    if (k > 0) {   /* the relaxation's viscous damping, on every velocity (chain_relax.c) */
+        for (int i = 0; i < c->m.n_carts; i++)
+            for (int j = 7; j < 13; j++) dy[CART_NY * i + j] -= k * y[CART_NY * i + j];
+    }
+}
 
 static int accepted(void *ctx, double t, double *y) {
     Chain *c = ctx;
