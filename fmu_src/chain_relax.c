@@ -29,7 +29,8 @@
 #define RELAX_RATE 10.0         /* 1/s: about critical for the slowest modes of a loop at rest; after 1 s of
                                    it the forces of a chain left at rest drift by under 3 N (layouts 1-7) */
 #define RELAX_COR 0.5           /* the contact damping during relaxation */
-#define RELAX_TOL_MAX 1e-3      /* the solver's tolerance while relaxing: the run's, at most this */
+#define RELAX_TOL_MAX 1e-5      /* the solver's tolerance while relaxing: the run's, at most this, so that the
+                                   chain at rest lands within 0.1 N of a finer run's whatever the run's tolerance */
 
 /* Every velocity times k (the velocities are state: the solver's last stage and the vector path's
  * copy no longer hold). */
@@ -54,8 +55,8 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     m->drive_mode = DRIVE_INTERNAL;   /* drive off: no external thrust either */
     st->v_ref = st->Kp = st->Ki = 0.0;
     double tol = c->ode.tol;
-    /* the run's tolerance, not a looser one: the steps would then sit at the joints' stability limit, and
-       the error control's noise there leaves the chain about 1 N from where a finer run relaxes it */
+    /* not looser: the steps would then sit at the joints' stability limit, and the error control's noise
+       there leaves the chain up to 0.8 N from where a finer run relaxes it (1e-4: 0.3-0.8 N, layouts 1-7) */
     c->ode.tol = tol < RELAX_TOL_MAX ? tol : RELAX_TOL_MAX;
     damp(c, 0.0);
     st->relax_rate = RELAX_RATE;
