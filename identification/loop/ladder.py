@@ -1,14 +1,14 @@
 """An effect probed on a ladder (the joint play: catalogue.JointClearance) is
 extended within one rung, where its landscape is a single valley. The rung is
-the linear ranking's pick at the base's CoRs, and those CoRs have absorbed
-part of the effect: on one record of the rates benchmark (20 um drawn) the
-pick was the 7.7 um rung and the extension ended on its upper
-bound, 11.5 um, 37 times above the noise (docs/close_loop.md). The gap and
-the CoRs move together there: with the CoRs held at that point, every other
-gap from 3.3 to 40 um fitted worse. So an extension that ends on its rung's
-edge is identified again, as it was (the complex over all its parameters,
-then the refinement), on the rung beyond that edge, from its point, and
-walks on while it keeps ending on the edge and fitting better. This is
+the linear ranking's pick at the base's CoRs, and the base's CoRs have
+absorbed whatever part of the effect their own signatures share with it; the
+pick is then biased towards a smaller size, and the extension can end on its
+rung's upper bound with the misfit still falling across it (the size and
+the CoRs move together there). The rule, for any record and any laddered
+effect: an extension that ends within EDGE of its rung's bound is identified
+again, as it was (the complex over all its parameters, then the refinement),
+on the rung beyond that edge, from its point, and walks on while it keeps
+ending on the edge and fitting better, at most STEPS rungs. This is
 estimation of a candidate that has passed its tests; it adds no hypothesis
 to them."""
 from __future__ import annotations

@@ -2,11 +2,11 @@
 
 A ripple of pitch p drives every cart at the order 1/p of its own travel, so
 the residual shows a line there even where the model's trajectory has
-diverged from the record's (docs/close_loop.md, "Why the ripple is missed": on
-nine ripple misses the residual's strongest line was the ripple's order within
-2 % on five). The attribution's scan of 76 pitches probed at 100 N ranks what
-the chaotic divergence of a 100 N push looks like, not the ripple's line, and
-a pitch 1.3 % off drifts a third of a cycle over a record of 27 pitches.
+diverged from the record's (docs/close_loop.md, "Why the ripple is missed").
+The attribution's scan of pitches, each probed at a fixed thrust, ranks what
+the chaotic divergence of that push looks like rather than the ripple's
+line, and a pitch off by 1/(3 n) drifts a third of a cycle over a record of
+n pitches: the scan's grid is too coarse for a long record, the line is not.
 
 `ripple_lines` returns the lines' pitches to a fraction of the order resolution
 (Hann window, zero padding, a parabola through the log amplitude at the peak)

@@ -1,10 +1,10 @@
 """Two candidates that both pass (issue 18): which one the record prefers.
 
 A candidate that passes every test only shows that the base is missing
-*something* its parameters can imitate. A 1 um play in every joint changes a
-steady record so much that a bump at one joint, identified with the CoRs,
-removed 80 % of the misfit and was confirmed (on two records of the rates
-benchmark with that play, docs/close_loop.md). So before
+*something* its parameters can imitate: two effects whose signatures
+overlap can each take most of the other's misfit (a play in every joint and
+a bump at one joint, both straining the joints, are such a pair;
+docs/close_loop.md). So before
 the first candidate that passes is confirmed, the next one in the order is
 examined too (close_loop._attempt); if it passes as well (adequate or not),
 the two extended models are compared by BIC. The models are not nested: each is scored on the same
