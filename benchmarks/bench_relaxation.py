@@ -10,8 +10,8 @@ seven forces over that time (a settled chain does not move). Then whether
 the start is a smooth function of where the chain stands: the forces at
 t = 0 for trigger points SMOOTH_STEP apart, their largest second difference
 against their largest first difference. Then the relaxation of length T at
-two run tolerances (the relaxation runs at ten times the run's, at most
-1e-3): whether its steps are bounded by the tolerance.
+two looser run tolerances (the relaxation runs at the run's, at most 1e-5;
+before, at ten times the run's, at most 1e-3): what a looser run saves.
 
     .venv/bin/python benchmarks/bench_relaxation.py --json benchmarks/results/relaxation.json
     .venv/bin/python benchmarks/bench_relaxation.py --doc --json benchmarks/results/relaxation_kinetic.json \

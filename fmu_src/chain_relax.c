@@ -20,7 +20,6 @@
  * jumps by up to a newton or more, and an identification's objective
  * inherits the jumps as local minima in the trigger point and the
  * pretension (docs/benchmarks.md). */
-#include <math.h>
 #include <string.h>
 
 #include "rhs_shared.h"
