@@ -101,6 +101,7 @@ void chain_free(Chain *c) {
     for (size_t i = 0; i < sizeof ptrs / sizeof ptrs[0]; i++)
         if (ptrs[i]) a.free(ptrs[i]);
     track_free(&c->m.track, &a);
+    chain_trace_free(c);
     a.free(c);
 }
 

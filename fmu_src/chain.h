@@ -50,6 +50,20 @@ int chain_step(Chain *c, double t_end, char *err, size_t errlen);
 /* Fills the outputs from the current state. */
 void chain_outputs(Chain *c, LSSOutputs *out);
 
+/* Recording of the accepted steps (on: from now, an empty trace; off: stop)
+ * and its memory. */
+void chain_trace(Chain *c, int on);
+void chain_trace_free(Chain *c);
+/* Takes the steps of a trace from the current time (they must start there):
+ * a follower on its leader's steps (dopri_replay). 0, or 1 with a message. */
+int chain_replay(Chain *c, const ChainTrace *tr, char *err, size_t errlen);
+/* chain_relax on a leader's recorded relaxation steps instead of its own. */
+int chain_relax_replay(Chain *c, const ChainTrace *tr, char *err, size_t errlen);
+/* Does the relaxation at rest ignore this parameter (value reference)? Those
+ * it overrides while relaxing: a chain that differs from another only in
+ * them relaxes to the same state. */
+int chain_relax_ignores(int vr);
+
 /* Right-hand side dy = f(t, y); fills the scratch. */
 void chain_rhs(Chain *c, double t, const double *y, double *dy);
 

@@ -149,6 +149,15 @@ enum { LSS_METHOD_DOPRI5 = 0, LSS_METHOD_DOP853 = 1 };
 
 struct ChainSimd;
 
+/* The accepted steps of a run, kept while a follower chain (sensitivity.c)
+ * is to take them after it: not part of the state. */
+typedef struct {
+    double *h, *t;                    /* step sizes and the times they landed at */
+    long n, cap;
+    int on;                           /* recording */
+    int lost;                         /* a step could not be recorded (out of memory) */
+} ChainTrace;
+
 typedef struct {
     ChainModel m;
     ChainState st;
@@ -158,6 +167,7 @@ typedef struct {
     int scratch_at_state;             /* the scratch describes st.y as it is now */
     int path;                         /* LSS_PATH_* in use, fixed at creation */
     struct ChainSimd *simd;           /* the vector paths' workspace (NULL on the scalar path) */
+    ChainTrace trace;                 /* the accepted steps, while recording */
 } Chain;
 
 #endif

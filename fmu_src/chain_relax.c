@@ -20,6 +20,7 @@
  * jumps by up to a newton or more, and an identification's objective
  * inherits the jumps as local minima in the trigger point and the
  * pretension (docs/benchmarks.md). */
+#include <stdio.h>
 #include <string.h>
 
 #include "rhs_shared.h"
@@ -41,7 +42,8 @@ static void damp(Chain *c, double k) {
     chain_simd_invalidate(c);   /* the vector path's copy of the state */
 }
 
-int chain_relax(Chain *c, double T, char *err, size_t errlen) {
+/* Relaxes for T s on the solver's own steps, or (tr) on a leader's recorded ones. */
+static int relax(Chain *c, double T, const ChainTrace *tr, char *err, size_t errlen) {
     ChainModel *m = &c->m;
     ChainState *st = &c->st;
     if (!(T > 0)) return 0;
@@ -49,6 +51,7 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     memcpy(saved, m->law, sizeof saved);
     double mu = m->mu_roll, v_ref = st->v_ref, Kp = st->Kp, Ki = st->Ki;
     int mode = m->drive_mode;
+    /* what is overridden here is what chain_relax_ignores names */
     for (int k = 0; k < CC_N; k++) m->law[k].chi = contact_chi(m->law_code, RELAX_COR);
     m->mu_roll = 0.0;
     m->drive_mode = DRIVE_INTERNAL;   /* drive off: no external thrust either */
@@ -59,7 +62,11 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     c->ode.tol = tol < RELAX_TOL_MAX ? tol : RELAX_TOL_MAX;
     damp(c, 0.0);
     st->relax_rate = RELAX_RATE;
-    int failed = chain_step(c, T, err, errlen);
+    int failed = tr ? chain_replay(c, tr, err, errlen) : chain_step(c, T, err, errlen);
+    if (!failed && tr && !(st->ode.t == T)) {
+        snprintf(err, errlen, "the leader's relaxation ended at %.17g s, not at %.17g s", st->ode.t, T);
+        failed = 1;
+    }
     st->relax_rate = 0.0;
     damp(c, 0.0);
     c->ode.tol = tol;
@@ -75,4 +82,16 @@ int chain_relax(Chain *c, double T, char *err, size_t errlen) {
     dopri_reset(&st->ode, 0.0, 1e-4);   /* the solver statistics count from t = 0 too */
     chain_start_memory(c);
     return 0;
+}
+
+int chain_relax(Chain *c, double T, char *err, size_t errlen) { return relax(c, T, NULL, err, errlen); }
+
+int chain_relax_replay(Chain *c, const ChainTrace *tr, char *err, size_t errlen) {
+    double T = tr->n ? tr->t[tr->n - 1] : 0.0;
+    return relax(c, T, tr, err, errlen);
+}
+
+int chain_relax_ignores(int vr) {
+    return vr == VR_CONTACT_E_JA || vr == VR_CONTACT_E_JR || vr == VR_CONTACT_E_SW || vr == VR_CONTACT_E_RW ||
+           vr == VR_WHEEL_MU_ROLL || vr == VR_DRIVE_KP || vr == VR_DRIVE_KI || vr == VR_DRIVE_V_REF;
 }

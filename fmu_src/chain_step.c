@@ -46,10 +46,50 @@ static void rhs(void *ctx, double t, const double *y, double *dy) {
     }
 }
 
+/* Appends an accepted step to the trace, growing it by half (the host's calloc, no realloc). */
+static void record(Chain *c, double h, double t) {
+    ChainTrace *tr = &c->trace;
+    if (tr->n == tr->cap) {
+        long cap = tr->cap < 256 ? 256 : tr->cap + tr->cap / 2;
+        double *nh = c->m.alloc.calloc((size_t)cap, sizeof(double));
+        double *nt = c->m.alloc.calloc((size_t)cap, sizeof(double));
+        if (!nh || !nt) {
+            if (nh) c->m.alloc.free(nh);
+            if (nt) c->m.alloc.free(nt);
+            tr->lost = 1;
+            return;
+        }
+        if (tr->n) {
+            memcpy(nh, tr->h, sizeof(double) * (size_t)tr->n);
+            memcpy(nt, tr->t, sizeof(double) * (size_t)tr->n);
+        }
+        if (tr->h) c->m.alloc.free(tr->h);
+        if (tr->t) c->m.alloc.free(tr->t);
+        tr->h = nh;
+        tr->t = nt;
+        tr->cap = cap;
+    }
+    tr->h[tr->n] = h;
+    tr->t[tr->n] = t;
+    tr->n++;
+}
+
+void chain_trace(Chain *c, int on) {
+    c->trace.on = on;
+    c->trace.n = 0;
+    c->trace.lost = 0;
+}
+
+void chain_trace_free(Chain *c) {
+    if (c->trace.h) c->m.alloc.free(c->trace.h);
+    if (c->trace.t) c->m.alloc.free(c->trace.t);
+    memset(&c->trace, 0, sizeof c->trace);
+}
+
 static int accepted(void *ctx, double t, double *y) {
     Chain *c = ctx;
     int changed = 0;
-    (void)t;
+    if (c->trace.on) record(c, c->st.ode.h_last, t);
     chain_simd_sync(c);
     for (int i = 0; i < c->m.n_carts; i++) {
         double *q = y + CART_NY * i + 3;
@@ -81,6 +121,16 @@ void chain_solver_init(Chain *c) {
 
 int chain_step(Chain *c, double t_end, char *err, size_t errlen) {
     int r = dopri_integrate(&c->ode, &c->st.ode, c->st.y, t_end, err, errlen);
+    c->scratch_at_state = (r == 0);
+    return r;
+}
+
+int chain_replay(Chain *c, const ChainTrace *tr, char *err, size_t errlen) {
+    if (tr->lost) {
+        snprintf(err, errlen, "the leading chain's steps could not be kept (out of memory)");
+        return 1;
+    }
+    int r = dopri_replay(&c->ode, &c->st.ode, c->st.y, tr->h, tr->t, tr->n, err, errlen);
     c->scratch_at_state = (r == 0);
     return r;
 }

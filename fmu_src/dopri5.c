@@ -236,6 +236,50 @@ static double trial853(Dopri *d, const double *y, double t, double h) {
     return err;
 }
 
+/* An accepted step of size h landing at t_new: the new point, the next
+ * step's first evaluation (DOP853: the 13th) and the accepted callback. */
+static void accept_step(Dopri *d, DopriState *st, double *y, double t_new, double h) {
+    const int d853 = d->method == DOPRI_DOP853;
+    st->t = t_new;
+    memcpy(y, d->ynew, sizeof(double) * (size_t)d->n);
+    int last_k = 6;
+    if (d853) {
+        d->rhs(d->ctx, st->t, y, d->k[12]);
+        st->n_rhs++;
+        last_k = 12;
+    }
+    double *tmp = d->k[0];
+    d->k[0] = d->k[last_k];
+    d->k[last_k] = tmp;
+    st->n_steps++;
+    st->h_last = h;
+}
+
+int dopri_replay(Dopri *d, DopriState *st, double *y, const double *h, const double *t, long n,
+                 char *err, size_t errlen) {
+    const int d853 = d->method == DOPRI_DOP853;
+    for (long i = 0; i < n; i++) {
+        if (!st->fsal_valid) {
+            d->rhs(d->ctx, st->t, y, d->k[0]);
+            st->n_rhs++;
+            st->fsal_valid = 1;
+        }
+        double e = d853 ? trial853(d, y, st->t, h[i]) : trial(d, y, st->t, h[i]);
+        st->n_rhs += d853 ? 11 : 6;
+        int finite = isfinite(e);
+        for (int j = 0; finite && j < d->n; j++) finite = isfinite(d->ynew[j]);
+        if (!finite) {
+            snprintf(err, errlen, "the follower's state turned non-finite in the step of %g s from t = %.9g s",
+                     h[i], st->t);
+            return 1;
+        }
+        accept_step(d, st, y, t[i], h[i]);
+        st->h = h[i];
+        if (d->accepted && d->accepted(d->ctx, st->t, y)) st->fsal_valid = 0;
+    }
+    return 0;
+}
+
 int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err, size_t errlen) {
     int n = d->n;
     double span = fabs(t_end) + 1.0;
@@ -295,19 +339,7 @@ int dopri_integrate(Dopri *d, DopriState *st, double *y, double t_end, char *err
                 fac = fac < 0.2 ? 0.2 : (fac > 10.0 ? 10.0 : fac);
                 double h_new = h / fac;
                 st->err_prev = e > 1e-4 ? e : 1e-4;
-                st->t = last ? t_end : st->t + h;
-                memcpy(y, d->ynew, sizeof(double) * (size_t)n);
-                int last_k = 6;
-                if (d853) {  /* the 13th evaluation, at the new point (the next step's first) */
-                    d->rhs(d->ctx, st->t, y, d->k[12]);
-                    st->n_rhs++;
-                    last_k = 12;
-                }
-                double *tmp = d->k[0];
-                d->k[0] = d->k[last_k];
-                d->k[last_k] = tmp;
-                st->n_steps++;
-                st->h_last = h;
+                accept_step(d, st, y, last ? t_end : st->t + h, h);
                 st->h = last ? fmax(fmin(h_new, h_prop), h) : h_new;
                 if (d->accepted && d->accepted(d->ctx, st->t, y)) st->fsal_valid = 0;
                 break;

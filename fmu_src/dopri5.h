@@ -44,4 +44,15 @@ void dopri_reset(DopriState *s, double t0, double h0);
  * right-hand side evaluation are at (t_end, y) on return. */
 int dopri_integrate(Dopri *d, DopriState *s, double *y, double t_end, char *err, size_t errlen);
 
+/* Replays n accepted steps of another run of the same system: from s->t,
+ * step i has size h[i] and lands at t[i] (the leader's times, so that both
+ * runs stand at the same times bit for bit); no error control, the accepted
+ * callback after each step as in dopri_integrate. A follower run on its
+ * leader's steps differs from it only by what its parameters change: the
+ * difference quotient of the two is the derivative of the discrete solution,
+ * free of the step-size control's noise (internal numerical
+ * differentiation). 0: ok; 1: a step turned non-finite (err filled). */
+int dopri_replay(Dopri *d, DopriState *s, double *y, const double *h, const double *t, long n,
+                 char *err, size_t errlen);
+
 #endif

@@ -102,6 +102,10 @@ static fmi2Status build_chain(Instance *in) {
     char err[1024];
     LSSParams p = in->p;
     if (in->tolerance_defined) p.solver_tolerance = in->tolerance;
+    if (sens_check(&p, err, sizeof err)) {
+        LOG_ERROR(in, "cannot build the chain: %s", err);
+        return fmi2Error;
+    }
     Chain *c = chain_create(&p, in->has_resources ? in->resource_dir : NULL, &in->alloc, err, sizeof err);
     if (!c) {
         /* a parse error names the file already; a chain that cannot be assembled on a
@@ -112,11 +116,21 @@ static fmi2Status build_chain(Instance *in) {
             LOG_ERROR(in, "cannot build the chain: %s (layout.name = '%s')", err, p.layout_name);
         return fmi2Error;
     }
+    chain_trace(c, p.sensitivity_n > 0);   /* the followers take the leader's steps */
     if (p.chain_relax_time > 0 && chain_relax(c, p.chain_relax_time, err, sizeof err)) {
         chain_free(c);
         LOG_ERROR(in, "cannot relax the chain at rest for chain.relax_time = %g s: %s", p.chain_relax_time, err);
         return fmi2Error;
     }
+    Sens sens;
+    if (sens_build(&sens, c, &p, in->has_resources ? in->resource_dir : NULL, &in->alloc, err, sizeof err)) {
+        chain_free(c);
+        LOG_ERROR(in, "cannot set up the sensitivities: %s", err);
+        return fmi2Error;
+    }
+    chain_trace(c, p.sensitivity_n > 0);
+    sens_free(&in->sens);
+    in->sens = sens;
     chain_free(in->chain);
     in->chain = c;
     in->chain_stale = 0;
@@ -130,6 +144,7 @@ fmi2Status lss_ensure_outputs(Instance *in) {
     }
     if (in->outputs_stale) {
         chain_outputs(in->chain, &in->out);
+        sens_outputs(&in->sens, &in->p, &in->out);
         in->outputs_stale = 0;
     }
     return fmi2OK;
@@ -209,6 +224,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 void fmi2FreeInstance(fmi2Component c) {
     Instance *in = (Instance *)c;
     if (!in) return;
+    sens_free(&in->sens);
     chain_free(in->chain);
     in->cb.freeMemory(in);
 }
@@ -285,6 +301,7 @@ fmi2Status fmi2Terminate(fmi2Component c) {
 
 fmi2Status fmi2Reset(fmi2Component c) {
     CHECK(c, "fmi2Reset", ST_ANY);
+    sens_free(&in->sens);
     chain_free(in->chain);
     in->chain = NULL;
     lss_params_defaults(&in->p);
@@ -385,7 +402,9 @@ static int settable(Instance *in, const char *fn, const LSSVarInfo *v) {
 /* After a value was stored: check the parameter set as a whole, adopt it. */
 static fmi2Status commit(Instance *in, const char *fn, const LSSParams *backup, const LSSVarInfo *v) {
     char err[512];
-    if (chain_check_params(&in->p, err, sizeof err)) {
+    /* the sensitivities' rules bind once the chain is built: before, their values may come in any order */
+    if (chain_check_params(&in->p, err, sizeof err) ||
+        (in->state == ST_STEP_COMPLETE && sens_check(&in->p, err, sizeof err))) {
         in->p = *backup;
         LOG_ERROR(in, "%s: %s", fn, err);
         return fmi2Error;
@@ -397,6 +416,7 @@ static fmi2Status commit(Instance *in, const char *fn, const LSSParams *backup, 
             return fmi2Error;
         }
         chain_set_inputs(in->chain, &in->p);
+        sens_set_inputs(&in->sens, &in->p);
         in->outputs_stale = 1;
     } else if (v->variability == LSS_FIXED || in->state == ST_INIT || v->causality == LSS_INPUT) {
         in->chain_stale = 1;
@@ -523,7 +543,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         lss_log(in, fmi2Warning, "logStatusWarning", "fmi2DoStep: drive.mode = 1 (external thrust) but no "
                 "drive.groupK.F input has been set: the motors push with 0 N until the master sets them");
     }
-    if (chain_step(in->chain, t_end, err, sizeof err) != 0) {
+    if (in->sens.n) chain_trace(in->chain, 1);
+    if (chain_step(in->chain, t_end, err, sizeof err) != 0 ||
+        sens_step(&in->sens, in->chain, &in->p, err, sizeof err) != 0) {
         in->state = ST_STEP_FAILED;
         in->outputs_stale = 1;
         lss_log(in, fmi2Discard, "logStatusDiscard", "fmi2DoStep from t = %g: %s", t, err);

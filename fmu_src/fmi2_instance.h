@@ -6,6 +6,7 @@
 
 #include "fmi2Functions.h"
 #include "chain.h"
+#include "sensitivity.h"
 #include "lss_vars.h"
 
 typedef enum {
@@ -27,6 +28,7 @@ typedef struct {
     LSSParams p;
     LSSOutputs out;
     Chain *chain;
+    Sens sens;              /* the followers of the forward sensitivities (sensitivity.n of them) */
     int chain_stale;        /* parameters changed since the chain was built */
     int outputs_stale;
     double start_time, time;

@@ -139,7 +139,8 @@ static int check_header(const SnapHeader *h, char *why, size_t len) {
         snprintf(why, len, "corrupt FMU state: unterminated string parameter");
         return 1;
     }
-    if (chain_check_params(&h->p, err, sizeof err) || (h->has_chain && chain_check_params(&h->built, err, sizeof err))) {
+    if (chain_check_params(&h->p, err, sizeof err) ||
+        (h->has_chain && (chain_check_params(&h->built, err, sizeof err) || sens_check(&h->built, err, sizeof err)))) {
         snprintf(why, len, "FMU state with invalid parameters: %s", err);
         return 1;
     }
@@ -167,9 +168,20 @@ static int check_snapshot(const SnapHeader *h, const double *data, const Chain *
        discarded step (and a Terminate that may follow) it may be past it */
     int exact = !(h->state & (ST_STEP_FAILED | ST_TERMINATED | ST_ERROR));
     char what[400];
-    if (chain_state_check(data, h->n, &h->built, h->time - h->start_time, exact, c, what, sizeof what)) {
-        snprintf(why, len, "corrupt FMU state: %s", what);
+    /* the leader's snapshot, then each follower's (sensitivity.h), all of one size */
+    size_t parts = 1 + (size_t)h->built.sensitivity_n, n1 = h->n / parts;
+    if (h->n % parts != 0) {
+        snprintf(why, len, "corrupt FMU state: %zu values do not split into %zu chains", h->n, parts);
         return 1;
+    }
+    for (size_t k = 0; k < parts; k++) {
+        LSSParams pk = h->built;
+        if (k > 0) sens_params(&h->built, (int)k - 1, &pk);
+        if (chain_state_check(data + k * n1, n1, &pk, h->time - h->start_time, exact, k ? NULL : c, what,
+                              sizeof what)) {
+            snprintf(why, len, "corrupt FMU state: %s%s", k ? "a follower's snapshot: " : "", what);
+            return 1;
+        }
     }
     return 0;
 }
@@ -186,7 +198,7 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
         return fmi2Error;
     }
     int has = in->chain && !in->chain_stale;
-    size_t n = has ? chain_state_size(in->chain) : 0;
+    size_t n1 = has ? chain_state_size(in->chain) : 0, n = n1 * (1 + (size_t)in->sens.n);
     if (has && lss_ensure_outputs(in) != fmi2OK) return fmi2Error;  /* cannot fail: the chain exists */
     if (s && s->h.n != n) {  /* an old snapshot of another size: replace it */
         in->cb.freeMemory(s);
@@ -216,7 +228,10 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     s->h.p = in->p;
     s->h.built = in->p;
     if (in->tolerance_defined) s->h.built.solver_tolerance = in->tolerance;
-    if (has) chain_state_save(in->chain, s->data);
+    if (has) {
+        chain_state_save(in->chain, s->data);
+        for (int k = 0; k < in->sens.n; k++) chain_state_save(in->sens.f[k], s->data + n1 * (size_t)(k + 1));
+    }
     *FMUstate = s;
     return fmi2OK;
 }
@@ -229,27 +244,37 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
         return fmi2Error;
     }
     Chain *fresh = NULL;
+    Sens fresh_sens;
+    memset(&fresh_sens, 0, sizeof fresh_sens);
+    size_t parts = 1 + (size_t)s->h.built.sensitivity_n, n1 = s->h.n / parts;
     if (s->h.has_chain) {
         LSSParams now = in->p;
         if (in->tolerance_defined) now.solver_tolerance = in->tolerance;
-        int same = in->chain && !in->chain_stale && chain_state_size(in->chain) == s->h.n &&
-                   same_structure(&now, &s->h.built);
-        if (!same) {  /* build a chain of the snapshot's structure, then load its state */
+        int same = in->chain && !in->chain_stale && chain_state_size(in->chain) == n1 &&
+                   (size_t)in->sens.n + 1 == parts && same_structure(&now, &s->h.built);
+        if (!same) {  /* build the chains of the snapshot's structure, then load their states */
             char err[1024];
-            fresh = chain_create(&s->h.built, in->has_resources ? in->resource_dir : NULL, &in->alloc, err,
-                                 sizeof err);
+            const char *res = in->has_resources ? in->resource_dir : NULL;
+            fresh = chain_create(&s->h.built, res, &in->alloc, err, sizeof err);
             if (!fresh) {
                 LOG_ERROR(in, "%s: cannot rebuild the chain of the FMU state: %s", fn, err);
                 return fmi2Error;
             }
-            if (chain_state_size(fresh) != s->h.n) {
+            if (chain_state_size(fresh) != n1) {
                 chain_free(fresh);
                 LOG_ERROR(in, "%s: the FMU state does not fit the chain it describes", fn);
                 return fmi2Error;
             }
+            if (sens_create(&fresh_sens, &s->h.built, res, &in->alloc, err, sizeof err)) {
+                chain_free(fresh);
+                LOG_ERROR(in, "%s: cannot rebuild the sensitivities of the FMU state: %s", fn, err);
+                return fmi2Error;
+            }
+            chain_trace(fresh, fresh_sens.n > 0);
         }
         /* the checks that need the chain (its track) */
         if (check_snapshot(&s->h, s->data, fresh ? fresh : in->chain, why, sizeof why)) {
+            sens_free(&fresh_sens);
             chain_free(fresh);
             LOG_ERROR(in, "%s: %s", fn, why);
             return fmi2Error;
@@ -257,6 +282,8 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
     }
     /* from here on nothing fails */
     if (fresh) {
+        sens_free(&in->sens);
+        in->sens = fresh_sens;
         chain_free(in->chain);
         in->chain = fresh;
     }
@@ -272,6 +299,8 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
     if (s->h.has_chain) {
         chain_state_load(in->chain, s->data);
         chain_set_inputs(in->chain, &in->p);
+        for (int k = 0; k < in->sens.n; k++) chain_state_load(in->sens.f[k], s->data + n1 * (size_t)(k + 1));
+        sens_set_inputs(&in->sens, &in->p);
         in->chain_stale = 0;
         if (s->h.has_out) {
             in->out = s->h.out;

@@ -45,6 +45,7 @@ class Var:
 P, CP, IN, OUT = "parameter", "calculatedParameter", "input", "output"
 N_GROUPS = 8   # motor groups a plant model can drive (drive.n_groups <= N_GROUPS)
 N_LOAD_PORTS = 2   # item ports (an induction and a chute)
+N_SENS = 10        # forward sensitivities at most (the design vector's length)
 
 FORCE_CHANNELS = [
     "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
@@ -255,6 +256,21 @@ VARIABLES: list[Var] = [
     Var("energy.E_items", "Real", OUT, "continuous",
         "mechanical energy the item ports changed (the inelastic loss of an item put on a moving cart, "
         "the items' weight): E_mech - E_items - W_motor + W_damping + W_rolling stays constant", "J"),
+    # --- issue 50: forward sensitivities of the force channels -------------------------------------
+    Var("sensitivity.n", "Integer", P, "fixed",
+        "forward sensitivities: how many parameters to differentiate the force channels by (0: none); "
+        "each is a follower chain that takes the solver's steps of the chain itself, its parameter moved by "
+        "sensitivity.pK.step, so that sensitivity.pK.<channel> is free of the step-size control's noise",
+        start=0, min=0, max=N_SENS),
+    *[Var(f"sensitivity.p{k}.vr", "Integer", P, "fixed",
+          f"the value reference of the Real parameter the {k}-th sensitivity is taken by (a parameter, "
+          "not an input)", start=0, min=0) for k in range(1, N_SENS + 1)],
+    *[Var(f"sensitivity.p{k}.step", "Real", P, "fixed",
+          f"the {k}-th parameter's difference step, in its unit (either sign, not 0; the moved value must "
+          "lie in the parameter's range)", start=1e-6, min=-1e6, max=1e6) for k in range(1, N_SENS + 1)],
+    *[Var(f"sensitivity.p{k}.{c.split('.', 1)[1]}", "Real", OUT, "continuous",
+          f"derivative of {c} by the {k}-th sensitivity's parameter, per unit of that parameter")
+      for k in range(1, N_SENS + 1) for c in FORCE_CHANNELS],
 ]
 
 BY_NAME = {v.name: v for v in VARIABLES}
