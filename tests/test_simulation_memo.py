@@ -75,7 +75,7 @@ def test_a_joint_jacobians_trigger_column_runs_only_its_own_record(records, runs
     lo, hi = np.array(p.bounds_array, float).T
     steps = 0.02 * (hi - lo)
     del runs[:]
-    J, used, _ = jacobian(p, x, y0, steps=steps)
+    J, used, _ = jacobian(p, x, y0, steps=steps, exact=False)   # every column differenced
     t = p.parts[1].free.index(TRIGGER)
     base = p.part_x(1, x)[t]
     moved = [name for name, xr in runs if name == p.parts[1].name and xr[t] != round(base, 12)]

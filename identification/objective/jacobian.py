@@ -18,7 +18,7 @@ from typing import Optional
 import numpy as np
 
 from .parallel import Failed, simulate_all
-from .problem import IdentificationProblem
+from .problem import EXACT_STEP, IdentificationProblem
 
 log = logging.getLogger(__name__)
 
@@ -28,10 +28,25 @@ RESPONSE = 5.0                 # the change a difference step aims at, in noise 
 MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound range
 
 
+def exact_columns(problem, x: np.ndarray) -> dict:
+    """{k: d simulation / d x_k} of the free variables the FMU differentiates
+    itself (the problem's exact_indices: its forward sensitivities, one run
+    for all); {} where it cannot, or if that run failed (logged: the columns
+    are then differenced)."""
+    ks = problem.exact_indices() if hasattr(problem, "exact_indices") else ()
+    if not ks:
+        return {}
+    try:
+        return problem.simulate_exact(x, ks)[1]
+    except Exception as exc:
+        log.warning("the FMU's sensitivities failed (%s); the columns are differenced", exc)
+        return {}
+
+
 def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
              rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
              steps: Optional[np.ndarray] = None, guess: Optional[np.ndarray] = None,
-             recheck: Optional[float] = None) -> tuple:
+             recheck: Optional[float] = None, exact: bool = True) -> tuple:
     """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
     each column): central differences inside the bounds, one-sided at a bound;
     the roughness is |forward - backward| / |their mean| in the metric
@@ -51,7 +66,11 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
 
     The simulations run in rounds (each column's first step, its rescaled
     steps, its second step), side by side on the problem's pool when it has
-    one (identification.objective.parallel): the same points either way."""
+    one (identification.objective.parallel): the same points either way.
+
+    `exact`: the columns the FMU can differentiate itself come from its
+    forward sensitivities instead (exact_columns: smooth, roughness 0, their
+    step the followers' tiny one); the others are differenced as above."""
     lo, hi = np.array(problem.bounds_array, float).T
     wt = np.ones(sim0.shape[1]) if weights is None else np.asarray(weights, float)
     n = len(x)
@@ -80,10 +99,17 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
         return out
 
     span = hi - lo
+    known = exact_columns(problem, x) if exact else {}
+    for k, col in known.items():
+        J[:, :, k] = col
+        used[k] = EXACT_STEP * span[k]
+    todo = [k for k in range(n) if k not in known]
     first = steps if steps is not None else guess
-    h = np.array([float(first[k]) if first is not None and first[k] > 0 else rel_step * span[k] for k in range(n)])
+    # a step at or below the followers' (a column the core gave last time) is no step to difference with
+    h = np.array([float(first[k]) if first is not None and first[k] > EXACT_STEP * span[k] else rel_step * span[k]
+                  for k in range(n)])
     sgn = np.where(x + h <= hi, 1.0, -1.0)
-    y1 = run({k: at(k, sgn[k] * h[k]) for k in range(n)})
+    y1 = run({k: at(k, sgn[k] * h[k]) for k in todo})
     if steps is None:
         for _ in range(3):   # scale each step to the response (linear guess), at most 3 tries
             again = {}
@@ -140,9 +166,13 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
 def one_sided_jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
                   rel_step: float = REL_STEP) -> list:
     """One-sided differences of the simulation in each free variable, towards the
-    inside of the bounds; a failed run gives no column."""
-    steps, points = [], []
+    inside of the bounds (the FMU's sensitivities where it has them, see
+    exact_columns); a failed run gives no column."""
+    known = exact_columns(problem, x)
+    steps, points, ks = [], [], []
     for k, (lo, hi) in enumerate(problem.bounds_array):
+        if k in known:
+            continue
         h = rel_step * (hi - lo)
         if x[k] + h > hi:
             h = -h
@@ -150,13 +180,14 @@ def one_sided_jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.n
         xk[k] += h
         steps.append(h)
         points.append(xk)
-    cols = []
-    for k, (h, y) in enumerate(zip(steps, simulate_all(problem, points, base=(x, sim0)))):
+        ks.append(k)
+    cols = dict(known)
+    for k, h, y in zip(ks, steps, simulate_all(problem, points, base=(x, sim0))):
         if isinstance(y, Failed):
             log.warning("base column %s failed: %s", problem.free[k], y.message)
         else:
-            cols.append((y - sim0) / h)
-    return cols
+            cols[k] = (y - sim0) / h
+    return [cols[k] for k in sorted(cols)]
 
 
 def weights(problem: IdentificationProblem) -> np.ndarray:

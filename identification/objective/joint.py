@@ -133,6 +133,43 @@ class JointProblem:
     def simulate(self, x: Sequence[float], extra: Optional[Mapping[str, object]] = None) -> np.ndarray:
         return np.hstack([p.simulate(self.part_x(k, x), extra) for k, p in enumerate(self.parts)])
 
+    def exact_indices(self) -> tuple:
+        """The joint variables every record that sees them can differentiate in the core
+        (IdentificationProblem.exact_indices)."""
+        out = []
+        for j, name in enumerate(self.free):
+            v = self._source(name)[1]
+            if all(self.parts[i].free.index(v) in self.parts[i].exact_indices() for i in self._holders(name)):
+                out.append(j)
+        return tuple(out)
+
+    def _holders(self, name: str) -> list:
+        """The records a joint variable acts on: its record for a trigger point, else all."""
+        k, v = self._source(name)
+        return [k] if v == TRIGGER else list(range(len(self.parts)))
+
+    def simulate_exact(self, x: Sequence[float], ks: Sequence[int]) -> tuple:
+        """(the simulation at x, {k: its derivative by x_k}): each record's own
+        run with its followers; a record's columns of another record's trigger
+        point are zero."""
+        n = len(FORCE_CHANNELS)
+        mine = [{k: p.free.index(self._source(self.free[k])[1]) for k in ks if i in self._holders(self.free[k])}
+                for i, p in enumerate(self.parts)]   # per record: joint index -> the record's own free index
+        tasks = [(p, self.part_x(i, x), sorted(set(mine[i].values()))) for i, p in enumerate(self.parts)]
+        pool = self.pool
+        if pool is None:
+            runs = [_exact(t) for t in tasks]
+        else:   # the records side by side: each run is a function of its record and point alone
+            runs = list(pool.map(_exact, tasks))
+            for (p, xi, _), (y, _) in zip(tasks, runs):
+                p.remember(xi, y)
+        ys, cols = [], {k: [] for k in ks}
+        for i, (y, d) in enumerate(runs):
+            ys.append(y)
+            for k in ks:
+                cols[k].append(d[mine[i][k]] if k in mine[i] else np.zeros((len(y), n)))
+        return np.hstack(ys), {k: np.hstack(c) for k, c in cols.items()}
+
     def remember(self, x: Sequence[float], y: np.ndarray) -> None:
         """Keep `y` (the records side by side) as the simulation at x: each record its own columns."""
         n = len(FORCE_CHANNELS)
@@ -163,3 +200,9 @@ class JointProblem:
     def close(self) -> None:
         for p in self.parts:
             p.sim.close()
+
+
+def _exact(task) -> tuple:
+    """One record's simulation and its columns from the core (a pool's task)."""
+    problem, x, ks = task
+    return problem.simulate_exact(x, ks)

@@ -26,13 +26,13 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-from lss_fmu.design import COR_BOUNDS, CORS, DESIGN, BY_SYMBOL, is_effect_parameter, symbol
+from lss_fmu.design import COR_BOUNDS, CORS, DESIGN, BY_SYMBOL, TRIGGER, is_effect_parameter, symbol
 from lss_fmu.layouts import load_track
 from lss_fmu.protocol import Protocol, TRANSIENT_TOLERANCE
 from lss_fmu.runner import LazySimulator
 from lss_fmu.sensor import OFFSET_STD, interp_cubic
 from lss_fmu.triggered import arriving_cart, sample_rate_of, simulate_from_rest, simulate_triggered
-from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS
+from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS, N_SENS, value_reference
 
 from .features import stat_errors
 
@@ -44,6 +44,9 @@ BAD_VALUE = 100.0  # worse than any simulation that ran (7 channels at NRMSD ~3.
 # the other objectives are not bounded like Eq. 10-12 (the likelihood's f is ~7 at the truth and
 # thousands far from it): a failed simulation must still rank below every one that ran
 BAD_VALUES = {"pointwise": BAD_VALUE, "statistics": 1e12, "likelihood": 1e12}
+EXACT_STEP = 1e-6     # a sensitivity follower's step, of the bound range: the derivative of the discrete solution
+                      # is the same to 0.1 % from 1e-9 to 1e-7 m of pretension (its most nonlinear variable) and
+                      # the difference quotient stands 8 orders above the forces' rounding
 MEMO_BYTES = 8 << 20   # simulations kept per problem, the newest first: a central Jacobian's (its base and two
                        # to five runs per variable) fit many times over on a transient window (84 kB each at 2.5 s)
 
@@ -95,6 +98,8 @@ class IdentificationProblem:
                                          # likelihood: RMSD over the declared noise
     noise: Optional[np.ndarray] = None   # per force channel, N: the sensor's white noise (likelihood)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
+    sensitivities: bool = True           # Jacobian columns from the FMU's forward sensitivities where it can
+                                         # (exact_indices); False: every column by differences of whole runs
     pool: Optional[object] = field(default=None, repr=False, compare=False)  # an Executor for simulations side by
                                          # side (identification.objective.parallel); not pickled
     # the last simulations, by everything they depend on (see simulate); not copied by replace, not pickled
@@ -243,7 +248,50 @@ class IdentificationProblem:
         """A Dask key of the problem: what it pickles to (not its pool, not its memo)."""
         return hashlib.sha256(pickle.dumps(self)).hexdigest()
 
-    def _through_filter(self, x, extra) -> np.ndarray:
+    # -- derivatives from the core ---------------------------------------------------
+    def exact_indices(self) -> tuple:
+        """The free variables whose columns of the Jacobian the FMU computes
+        itself (sensitivity.*: follower chains on the simulation's own steps,
+        one run for all of them): on a record from rest, every design
+        variable that is a Real parameter of the FMU, the trigger point
+        included (it places the chain, chain.s_start); not the set point,
+        which the schedule sets as an input. None on a record whose trigger
+        is found while the chain runs (its time moves with every variable)."""
+        if not (self.sensitivities and self.protocol.from_rest):
+            return ()
+        out = []
+        for k, name in enumerate(self.free):
+            var = BY_NAME.get("chain.s_start" if name == TRIGGER else name)
+            if var is not None and var.type == "Real" and var.causality == "parameter":
+                out.append(k)
+        return tuple(out[:N_SENS])
+
+    def simulate_exact(self, x: Sequence[float], ks: Sequence[int]) -> tuple:
+        """(the simulation at x, {k: d simulation / d x_k}) for the free
+        variables ks (a subset of exact_indices), from one run: the FMU's
+        followers, each moved by EXACT_STEP of its bound range towards the
+        inside. The simulation is the one `simulate` gives, bit for bit, and
+        is kept as such."""
+        x = np.asarray(x, float)
+        extra, steps = {"sensitivity.n": len(ks)}, []
+        for j, k in enumerate(ks, 1):
+            name = self.free[k]
+            lo, hi = self.bounds[name]
+            h = EXACT_STEP * (hi - lo) * (1.0 if x[k] + EXACT_STEP * (hi - lo) <= hi else -1.0)
+            extra[f"sensitivity.p{j}.vr"] = value_reference("chain.s_start" if name == TRIGGER else name)
+            extra[f"sensitivity.p{j}.step"] = h
+            steps.append(h)
+        channels = list(FORCE_CHANNELS) + [f"sensitivity.p{j}.{c.split('.', 1)[1]}"
+                                           for j in range(1, len(ks) + 1) for c in FORCE_CHANNELS]
+        if self.anti_alias is None:
+            y = self.run(x, extra, channels=channels)
+        else:
+            y = self._through_filter(x, extra, channels=channels)
+        n = len(FORCE_CHANNELS)
+        self._keep(self._memo_key(x, None), y[:, :n])
+        return y[:, :n].copy(), {k: y[:, n * (j + 1):n * (j + 2)].copy() for j, k in enumerate(ks)}
+
+    def _through_filter(self, x, extra, channels: Sequence[str] = FORCE_CHANNELS) -> np.ndarray:
         """The simulation through the logger's declared anti-alias filter, from
         FILTER_LEAD s before the trigger, so that the filter's 4 ms of group delay
         is in the model and not in the residual: simulated on the communication
@@ -256,7 +304,7 @@ class IdentificationProblem:
         refilter = bool(self.filter_rate) and abs(self.filter_rate * h - 1.0) > 1e-9
         tail = 6 if refilter else 3   # the cubics' support past the last sample, on each grid
         grid = np.arange(-int(np.ceil(FILTER_LEAD / h)), int(np.ceil(self.times[-1] / h)) + tail) * h
-        y = self.run(x, extra, times=grid, history=FILTER_LEAD + 2 * h)
+        y = self.run(x, extra, channels=channels, times=grid, history=FILTER_LEAD + 2 * h)
         t0 = grid[0]
         if refilter:
             # the filter where the logger runs it: a digital Butterworth's response depends on its

@@ -103,7 +103,9 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
     sim0 = problem.simulate(x) if sim is None else np.asarray(sim, float)
     r = tared(problem.samples - sim0, problem.tare)
     sigma2 = np.maximum(np.mean(r ** 2, axis=0), 1e-30)
-    J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2, recheck=ROUGH)
+    # differenced, not the core's sensitivities: the roughness of each column (forward against backward)
+    # is what tells a chaotic response from a smooth one here
+    J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2, recheck=ROUGH, exact=False)
     if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
         demean = np.abs((problem.samples - sim0).mean(axis=0)) <= problem.tare
         J[:, demean, :] -= J[:, demean, :].mean(axis=0)
