@@ -44,7 +44,7 @@
 #include "lss_guid.h"
 #include "lss_vars.h"
 
-#define MAX_OUT 64
+#define MAX_OUT 256   /* every Real output and calculated parameter */
 #define MAX_THREADS 64
 
 typedef struct {
@@ -156,6 +156,19 @@ static void set_params(Env *env, fmi2Component c, int k) {
     CALL(fmi2OK, fmi2SetString(c, &vr_s, 1, &layout));
     CALL(fmi2OK, fmi2SetInteger(c, vr_i, 2, ints));
     CALL(fmi2OK, fmi2SetReal(c, vr_r, 3, r));
+    if (k % 5 == 3) {  /* every fifth cycle: two forward sensitivities; every tenth from rest, relaxed first */
+        fmi2ValueReference vr_n[3] = {VR_SENSITIVITY_N, VR_SENSITIVITY_P1_VR, VR_SENSITIVITY_P2_VR};
+        fmi2ValueReference vr_h[2] = {VR_SENSITIVITY_P1_STEP, VR_SENSITIVITY_P2_STEP};
+        fmi2Integer n[3] = {2, VR_CONTACT_E_JA, VR_CHAIN_PRETENSION};
+        fmi2Real h[2] = {1e-6, 1e-9};
+        CALL(fmi2OK, fmi2SetInteger(c, vr_n, 3, n));
+        CALL(fmi2OK, fmi2SetReal(c, vr_h, 2, h));
+        if (k % 10 == 3) {
+            fmi2ValueReference vr_rest[2] = {VR_CHAIN_V_INIT, VR_CHAIN_RELAX_TIME};
+            fmi2Real rest[2] = {0.0, 0.2};
+            CALL(fmi2OK, fmi2SetReal(c, vr_rest, 2, rest));
+        }
+    }
     if (k % 3 == 1) {  /* every third cycle: the external drive in groups, an item on a cart from the start */
         fmi2ValueReference vr_e[3] = {VR_DRIVE_MODE, VR_DRIVE_N_GROUPS, VR_LOAD1_CART};
         fmi2ValueReference vr_f[3] = {VR_DRIVE_GROUP1_F, VR_DRIVE_GROUP1_F + 1, VR_LOAD1_MASS};
@@ -286,7 +299,7 @@ static void cycle(Env *env, const Opts *o, int k, int extras, double *out) {
     if (!c) return;
     set_params(env, c, k);
     double ref[MAX_OUT], again[MAX_OUT];
-    if (extras && k % 10 == 0) {
+    if (extras && (k % 10 == 0 || k % 10 == 3)) {   /* 3: with followers, relaxed at rest */
         /* one step, a round trip of the FMU state, then the cycle proper */
         CALL(fmi2OK, fmi2SetupExperiment(c, fmi2False, 0.0, 0.0, fmi2False, 0.0));
         CALL(fmi2OK, fmi2EnterInitializationMode(c));
