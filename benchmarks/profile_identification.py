@@ -13,6 +13,8 @@ simulations run and the seconds they simulated.
     .venv/bin/python benchmarks/profile_identification.py --table --json benchmarks/results/profile_identification.json
     .venv/bin/python benchmarks/profile_identification.py --doc \
         --json benchmarks/results/profile_identification_before.json benchmarks/results/profile_identification.json
+    .venv/bin/python benchmarks/profile_identification.py --ab sensitivities-ab \
+        --json benchmarks/results/profile_sensitivities_before.json benchmarks/results/profile_sensitivities_after.json
 
 The records are the recovery bench's (`--work`, made if missing). Stages are
 found by wrapping the pipeline's stage functions for the run; a stage nested
@@ -225,6 +227,31 @@ def table(entry: dict) -> str:
     return "\n".join(lines)
 
 
+def ab_table(before: dict, after: dict) -> str:
+    """Two profiles of the same measurements side by side: CPU-s with their ratio, the
+    stages that changed most, f and the largest CoR error (e_JA, e_SW, e_RW)."""
+    out = ["| measurement (layout) | CPU-s, before -> after | growing windows | whole-record refinement | "
+           "first window: profile | f, before -> after | largest error of e_JA, e_SW, e_RW |",
+           "|---|---|---|---|---|---|---|"]
+    old = {m["measurement"]: m for m in before["rows"]}
+
+    def stage(m, name):
+        return sum(s["cpu_s"] for s in m["stages"] if s["stage"].endswith(name))
+
+    def worst(m):
+        return max(abs(m["cor_error"][k]) for k in ("e_JA", "e_SW", "e_RW"))
+    for b in after["rows"]:
+        a = old.get(b["measurement"])
+        if a is None:
+            continue
+        cells = [f"{stage(a, n):.0f} -> {stage(b, n):.0f}" for n in
+                 ("growing windows", "whole record / refinement", "first window: profile")]
+        out.append(f"| {b['measurement']} ({b['layout'].replace('layout', '')}) | {a['cpu_s']:.0f} -> "
+                   f"{b['cpu_s']:.0f} ({b['cpu_s'] / a['cpu_s']:.2f}) | {' | '.join(cells)} | "
+                   f"{a['f']:.4f} -> {b['f']:.4f} | {worst(a):.4f} -> {worst(b):.4f} |")
+    return "\n".join(out)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--measurements", default="20,1,9", help="recovery measurements (default: layouts 7, 1, 3)")
@@ -235,7 +262,13 @@ def main(argv=None) -> int:
     ap.add_argument("--table", action="store_true", help="print the Markdown tables of --json and stop")
     ap.add_argument("--doc", action="store_true", help="write the tables of the --json files (before, after) into "
                     "docs/benchmarks.md and stop")
+    ap.add_argument("--ab", metavar="TAG", default=None, help="write the side-by-side table of the two --json "
+                    "files (before, after) between docs/benchmarks.md's TAG markers and stop")
     args = ap.parse_args(argv)
+    if args.ab:
+        before, after = (json.loads(Path(j).read_text()) for j in args.json)
+        write_between(ROOT / "docs" / "benchmarks.md", args.ab, ab_table(before, after))
+        return 0
     if args.table or args.doc:
         texts = [table(json.loads(Path(j).read_text())) for j in args.json]
         if not args.doc:
