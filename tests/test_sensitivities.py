@@ -16,6 +16,8 @@ from identification.objective.jacobian import jacobian
 from identification.objective.joint import JointProblem, own
 from identification.objective.parallel import pooled
 from identification.objective.problem import from_measurement
+from identification.pipeline.driver import build_problem
+from identification.pipeline.settings import Settings, settings_from
 from lss_fmu.design import TRIGGER
 from lss_fmu.rig import load_truth, true_design_values
 from lss_fmu.runner import ChainSimulator, SimulationError
@@ -164,6 +166,7 @@ def records(rig_record):
 
 def _problem(rec):
     p = from_measurement(rec, "HW", window=1.2, tare=True, objective="likelihood")
+    p.sensitivities = True
     truth = true_design_values(load_truth(rec))
     lo, hi = np.array(p.bounds_array, float).T
     x = np.array([truth.get(n, 0.5 * (a + b)) for n, a, b in zip(p.free, lo, hi)])
@@ -185,6 +188,8 @@ def test_a_record_from_rest_takes_every_design_column_but_the_set_point_from_the
         assert diff <= max(2.0 * rough[k], 0.05) * size, (name, diff / size, rough[k])
         assert used[k] > 0 and (rough_e[k] == 0.0) == (k in p.exact_indices())
     steady = from_measurement(records[0], "HW", window=1.2)
+    assert steady.exact_indices() == ()       # not asked for: the default
+    steady.sensitivities = True
     steady.protocol = type(p.protocol)()      # a record whose trigger is found while the chain runs
     assert steady.exact_indices() == ()
 
@@ -208,3 +213,12 @@ def test_a_joint_problem_gives_each_record_its_own_trigger_column(records):
     with pooled(fresh, workers=2):
         y2, cols2 = fresh.simulate_exact(x, ks)
     assert np.array_equal(y2, y) and all(np.array_equal(cols2[k], cols[k]) for k in ks)
+
+
+def test_the_settings_switch_reaches_every_record(records):
+    """Off by default (docs/benchmarks.md: it changes Levenberg-Marquardt's path); `sensitivities = true`
+    in [identify] turns it on for every record of a joint problem."""
+    on = build_problem(records, "HW", settings_from({"sensitivities": True}))
+    off = build_problem(records, "HW", Settings())
+    assert on.exact_indices() and off.exact_indices() == ()
+    assert all(p.sensitivities for p in on.parts)

@@ -31,8 +31,8 @@ MIN_STEP, MAX_STEP = 1e-7, 0.05  # the limits of a difference step, of the bound
 def exact_columns(problem, x: np.ndarray) -> dict:
     """{k: d simulation / d x_k} of the free variables the FMU differentiates
     itself (the problem's exact_indices: its forward sensitivities, one run
-    for all); {} where it cannot, or if that run failed (logged: the columns
-    are then differenced)."""
+    for all); {} where the problem does not ask for them or cannot have them,
+    or if that run failed (logged: the columns are then differenced)."""
     ks = problem.exact_indices() if hasattr(problem, "exact_indices") else ()
     if not ks:
         return {}
@@ -68,9 +68,10 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     steps, its second step), side by side on the problem's pool when it has
     one (identification.objective.parallel): the same points either way.
 
-    `exact`: the columns the FMU can differentiate itself come from its
-    forward sensitivities instead (exact_columns: smooth, roughness 0, their
-    step the followers' tiny one); the others are differenced as above."""
+    `exact`: where the problem asks for them (its `sensitivities`), the
+    columns the FMU can differentiate itself come from its forward
+    sensitivities instead (exact_columns: smooth, roughness 0, their step the
+    followers' tiny one); the others are differenced as above."""
     lo, hi = np.array(problem.bounds_array, float).T
     wt = np.ones(sim0.shape[1]) if weights is None else np.asarray(weights, float)
     n = len(x)
@@ -105,9 +106,7 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
         used[k] = EXACT_STEP * span[k]
     todo = [k for k in range(n) if k not in known]
     first = steps if steps is not None else guess
-    # a step at or below the followers' (a column the core gave last time) is no step to difference with
-    h = np.array([float(first[k]) if first is not None and first[k] > EXACT_STEP * span[k] else rel_step * span[k]
-                  for k in range(n)])
+    h = np.array([float(first[k]) if first is not None and first[k] > 0 else rel_step * span[k] for k in range(n)])
     sgn = np.where(x + h <= hi, 1.0, -1.0)
     y1 = run({k: at(k, sgn[k] * h[k]) for k in todo})
     if steps is None:

@@ -98,8 +98,11 @@ class IdentificationProblem:
                                          # likelihood: RMSD over the declared noise
     noise: Optional[np.ndarray] = None   # per force channel, N: the sensor's white noise (likelihood)
     sim: LazySimulator = field(default_factory=LazySimulator, repr=False, compare=False)  # the FMU instance
-    sensitivities: bool = True           # Jacobian columns from the FMU's forward sensitivities where it can
-                                         # (exact_indices); False: every column by differences of whole runs
+    sensitivities: bool = False          # Jacobian columns from the FMU's forward sensitivities where it can
+                                         # (exact_indices); False: every column by differences of whole runs.
+                                         # Not the default: the local derivative leads Levenberg-Marquardt into
+                                         # other valleys than the differences' 2 %-of-range steps on some records
+                                         # (docs/benchmarks.md, "Levers measured, not taken")
     pool: Optional[object] = field(default=None, repr=False, compare=False)  # an Executor for simulations side by
                                          # side (identification.objective.parallel); not pickled
     # the last simulations, by everything they depend on (see simulate); not copied by replace, not pickled

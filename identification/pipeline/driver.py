@@ -91,6 +91,8 @@ def build_problem(records: Sequence, model: str, settings: Settings, sim=None,
     else:
         kw.update(objective="statistics")
     parts = [from_measurement(m, model, sim=sim if k == 0 else None, **kw) for k, m in enumerate(records)]
+    for p in parts:
+        p.sensitivities = settings.sensitivities
     return parts[0] if len(parts) == 1 else JointProblem(parts)
 
 

@@ -11,6 +11,7 @@ expert's TOML file to change them, and the record of what a run used.
     tare = true           # zero errors within 3 sigma of the declared offset taken out
     first_window = 0.3    # s: the complex's window
     hold_rest = false     # the complex holds the pretension and trigger points at their start values
+    sensitivities = false # Levenberg-Marquardt's Jacobians from the FMU's forward sensitivities (records from rest)
     steady_evals = 600    # a steady record: the complex's evaluations on the statistics objective
     free = ["e_JA", "e_JR", "e_SW", "e_RW", "v_s", "d", "mu_d", "s_M", "K_P", "K_I"]
 
@@ -47,6 +48,7 @@ class Settings:
     tare: bool = True
     first_window: float = 0.3
     hold_rest: bool = False
+    sensitivities: bool = False
     steady_evals: int = 600
     free: tuple = field(default=DESIGN)
 
@@ -67,6 +69,7 @@ _RULES = {
     "tare": (bool, lambda v: True, "true or false"),
     "first_window": (float, lambda v: math.isfinite(v) and 0 < v <= 2.0, "a number of seconds in (0, 2]"),
     "hold_rest": (bool, lambda v: True, "true or false"),
+    "sensitivities": (bool, lambda v: True, "true or false"),
     "steady_evals": (int, lambda v: v >= 1, "an integer of at least 1"),
 }
 
