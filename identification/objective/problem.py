@@ -258,8 +258,9 @@ class IdentificationProblem:
         one run for all of them): on a record from rest, every design
         variable that is a Real parameter of the FMU, the trigger point
         included (it places the chain, chain.s_start); not the set point,
-        which the schedule sets as an input. None on a record whose trigger
-        is found while the chain runs (its time moves with every variable)."""
+        which the schedule sets as an input. Empty unless the problem asks
+        for them (`sensitivities`), and on a record whose trigger is found
+        while the chain runs (its time moves with every variable)."""
         if not (self.sensitivities and self.protocol.from_rest):
             return ()
         out = []
@@ -276,14 +277,13 @@ class IdentificationProblem:
         inside. The simulation is the one `simulate` gives, bit for bit, and
         is kept as such."""
         x = np.asarray(x, float)
-        extra, steps = {"sensitivity.n": len(ks)}, []
+        extra = {"sensitivity.n": len(ks)}
         for j, k in enumerate(ks, 1):
             name = self.free[k]
             lo, hi = self.bounds[name]
             h = EXACT_STEP * (hi - lo) * (1.0 if x[k] + EXACT_STEP * (hi - lo) <= hi else -1.0)
             extra[f"sensitivity.p{j}.vr"] = value_reference("chain.s_start" if name == TRIGGER else name)
             extra[f"sensitivity.p{j}.step"] = h
-            steps.append(h)
         channels = list(FORCE_CHANNELS) + [f"sensitivity.p{j}.{c.split('.', 1)[1]}"
                                            for j in range(1, len(ks) + 1) for c in FORCE_CHANNELS]
         if self.anti_alias is None:
