@@ -30,7 +30,7 @@ from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.layouts import load_track  # noqa: E402
 from lss_fmu.protocol import TRANSIENT_TOLERANCE, Protocol  # noqa: E402
 from lss_fmu.runner import ChainSimulator  # noqa: E402
-from lss_fmu.variables import FORCE_CHANNELS, value_reference  # noqa: E402
+from lss_fmu.variables import FORCE_CHANNELS, sensitivity_output, value_reference  # noqa: E402
 
 LAYOUTS = ("layout7", "layout1", "layout3")
 SECONDS = 1.0
@@ -76,7 +76,7 @@ def measure(layout: str) -> dict:
     for k, (name, (_, span)) in enumerate(VARIABLES.items(), 1):
         sp[f"sensitivity.p{k}.vr"] = value_reference(name)
         sp[f"sensitivity.p{k}.step"] = 1e-6 * (span if name != "chain.pretension" else d)
-        channels += [f"sensitivity.p{k}.{c.split('.', 1)[1]}" for c in FORCE_CHANNELS]
+        channels += [sensitivity_output(k, c) for c in FORCE_CHANNELS]
     with ChainSimulator() as sim:
         followed, y = run(sim, sp, speed, channels)
     central = 0.0

@@ -128,7 +128,7 @@ static fmi2Status build_chain(Instance *in) {
         LOG_ERROR(in, "cannot set up the sensitivities: %s", err);
         return fmi2Error;
     }
-    chain_trace(c, p.sensitivity_n > 0);
+    chain_trace(c, p.sensitivity_n > 0);   /* the relaxation's steps are taken: record the run's afresh */
     sens_free(&in->sens);
     in->sens = sens;
     chain_free(in->chain);

@@ -96,14 +96,16 @@ int sens_build(Sens *s, const Chain *lead, const LSSParams *p, const char *resou
         char why[512];
         if (chain_relax_ignores(vr_of(p, k))) {
             /* the same relaxation as the leader's, bit for bit: taken, not repeated */
-            if (!buf && !(buf = a->calloc(n, sizeof(double)))) {
-                snprintf(err, errlen, "out of memory for the followers' state at rest");
-                sens_free(s);
-                return 1;
+            if (!buf) {
+                if (!(buf = a->calloc(n, sizeof(double)))) {
+                    snprintf(err, errlen, "out of memory for the followers' state at rest");
+                    sens_free(s);
+                    return 1;
+                }
+                chain_state_save(lead, buf);
             }
             LSSParams pk;
             sens_params(p, k, &pk);
-            chain_state_save(lead, buf);
             chain_state_load(s->f[k], buf);
             chain_set_inputs(s->f[k], &pk);
         } else if (chain_relax_replay(s->f[k], &lead->trace, why, sizeof why)) {

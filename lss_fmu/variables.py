@@ -47,6 +47,11 @@ N_GROUPS = 8   # motor groups a plant model can drive (drive.n_groups <= N_GROUP
 N_LOAD_PORTS = 2   # item ports (an induction and a chute)
 N_SENS = 10        # forward sensitivities at most (the design vector's length)
 
+def sensitivity_output(k: int, channel: str) -> str:
+    """The output holding the derivative of force `channel` by the k-th sensitivity's parameter (k from 1)."""
+    return f"sensitivity.p{k}.{channel.split('.', 1)[1]}"
+
+
 FORCE_CHANNELS = [
     "transducer.joint.F_x", "transducer.joint.F_y", "transducer.joint.F_z",
     "transducer.steering.F_left", "transducer.steering.F_right",
@@ -268,7 +273,7 @@ VARIABLES: list[Var] = [
     *[Var(f"sensitivity.p{k}.step", "Real", P, "fixed",
           f"the {k}-th parameter's difference step, in its unit (either sign, not 0; the moved value must "
           "lie in the parameter's range)", start=1e-6, min=-1e6, max=1e6) for k in range(1, N_SENS + 1)],
-    *[Var(f"sensitivity.p{k}.{c.split('.', 1)[1]}", "Real", OUT, "continuous",
+    *[Var(sensitivity_output(k, c), "Real", OUT, "continuous",
           f"derivative of {c} by the {k}-th sensitivity's parameter, per unit of that parameter")
       for k in range(1, N_SENS + 1) for c in FORCE_CHANNELS],
 ]

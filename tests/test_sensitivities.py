@@ -21,13 +21,12 @@ from identification.pipeline.settings import Settings, settings_from
 from lss_fmu.design import TRIGGER
 from lss_fmu.rig import load_truth, true_design_values
 from lss_fmu.runner import ChainSimulator, SimulationError
-from lss_fmu.variables import FORCE_CHANNELS, value_reference
+from lss_fmu.variables import FORCE_CHANNELS, sensitivity_output, value_reference
 
 H = 1.0 / 600
 BASE = {"layout.name": "layout7", "contact.model": 2, "chain.v_init": 0.0, "chain.transducer": 0,
         "drive.v_ref": 0.0, "chain.s_start": 3.0, "chain.relax_time": 1.0,
         "contact.e_SW": 0.5, "contact.e_JA": 0.4, "chain.pretension": 0.004, "drive.Kp": 2000.0}
-SENS = [f"sensitivity.p{{k}}.{c.split('.', 1)[1]}" for c in FORCE_CHANNELS]
 
 
 def speed(t: float) -> float:
@@ -41,7 +40,7 @@ def with_sens(params: dict, steps: dict) -> tuple:
     for k, (name, h) in enumerate(steps.items(), 1):
         p[f"sensitivity.p{k}.vr"] = value_reference(name)
         p[f"sensitivity.p{k}.step"] = h
-        channels += [c.format(k=k) for c in SENS]
+        channels += [sensitivity_output(k, c) for c in FORCE_CHANNELS]
     return p, channels
 
 

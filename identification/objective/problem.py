@@ -32,7 +32,7 @@ from lss_fmu.protocol import Protocol, TRANSIENT_TOLERANCE
 from lss_fmu.runner import LazySimulator
 from lss_fmu.sensor import OFFSET_STD, interp_cubic
 from lss_fmu.triggered import arriving_cart, sample_rate_of, simulate_from_rest, simulate_triggered
-from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS, N_SENS, value_reference
+from lss_fmu.variables import BY_NAME, CONTACT_MODELS, FORCE_CHANNELS, N_SENS, sensitivity_output, value_reference
 
 from .features import stat_errors
 
@@ -284,14 +284,14 @@ class IdentificationProblem:
             h = EXACT_STEP * (hi - lo) * (1.0 if x[k] + EXACT_STEP * (hi - lo) <= hi else -1.0)
             extra[f"sensitivity.p{j}.vr"] = value_reference("chain.s_start" if name == TRIGGER else name)
             extra[f"sensitivity.p{j}.step"] = h
-        channels = list(FORCE_CHANNELS) + [f"sensitivity.p{j}.{c.split('.', 1)[1]}"
-                                           for j in range(1, len(ks) + 1) for c in FORCE_CHANNELS]
+        channels = list(FORCE_CHANNELS) + [sensitivity_output(j, c) for j in range(1, len(ks) + 1)
+                                           for c in FORCE_CHANNELS]
         if self.anti_alias is None:
             y = self.run(x, extra, channels=channels)
         else:
             y = self._through_filter(x, extra, channels=channels)
         n = len(FORCE_CHANNELS)
-        self._keep(self._memo_key(x, None), y[:, :n])
+        self.remember(x, y[:, :n])
         return y[:, :n].copy(), {k: y[:, n * (j + 1):n * (j + 2)].copy() for j, k in enumerate(ks)}
 
     def _through_filter(self, x, extra, channels: Sequence[str] = FORCE_CHANNELS) -> np.ndarray:
