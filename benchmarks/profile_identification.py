@@ -56,6 +56,7 @@ from lss_fmu.rig import generate_set, load_truth, parse_numbers  # noqa: E402
 STAGE_FUNCTIONS = [
     (identify_grown, "_once", "run"),
     (identify_grown, "single_start", "single start"),
+    (growing, "fit_rest", "first window: rest fit"),
     (growing, "identify", "first window: complex"),
     (growing, "profile_polish", "first window: profile"),
     (growing, "_reset_unseen", "first window: unseen"),

@@ -35,10 +35,10 @@ from lss_fmu.variables import FORCE_CHANNELS
 
 from .base_polish import STEP, profile_polish
 from .identify import identify
-from ..objective.joint import JointProblem
 from ..objective.noise import noise_levels
 from ..objective.problem import IdentificationProblem, tared
 from .refine import refine
+from .rest_fit import fit_rest, without
 from ..objective.uncertainty import at_noise
 from .windowing import truncated
 
@@ -128,9 +128,10 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     noise (`records_off`). `workers`: the complex's candidates side by side
     (identify; the serial run's result). `hold_rest`: the complex (and the
     profile) hold what sets the chain at rest (at_rest: the pretension, the
-    trigger points) at their start values, so each record relaxes once
-    instead of once per evaluation; Levenberg-Marquardt then frees them on
-    the first window (`info["rest_held"]`).
+    trigger points) where rest_fit.fit_rest puts them on the first window,
+    so each record relaxes once instead of once per evaluation;
+    Levenberg-Marquardt then frees them on the first window
+    (`info["rest_held"]`, the values held in `info["rest_fit"]`).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -140,15 +141,19 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     rest = [n for n in at_rest(problem) if n not in hold] if hold_rest and start is None else []
     q0 = dataclasses.replace(q, free=tuple(n for n in problem.free if n not in hold),
                              fixed={**q.fixed, **{n: problem.x0[n] for n in hold}}) if hold else q
-    q1 = _without(q0, rest) if rest else q0
+    per_window = STEP_ITERATIONS * (2 * len(problem.free) + 2) + 1
+    held, nfev = {}, 0
+    if rest:
+        held, nfev = fit_rest(q0, rest, channel_weights, per_window)
+    q1 = without(q0, rest, held) if rest else q0
     if start is None:
         res = identify(q1, max_evals=max(int(evals), len(q1.free) + 3), seed=seed, progress=False, journal=journal,
                        workers=workers)
         x1 = np.asarray(res.x, float)
-        nfev = int(getattr(res, "nfev", evals))
+        nfev += int(getattr(res, "nfev", evals))
     else:
         lo, hi = np.array(q1.bounds_array, float).T
-        x1, nfev = np.clip(np.asarray(start, float), lo, hi), 0
+        x1 = np.clip(np.asarray(start, float), lo, hi)
     if channel_weights is not None:
         w = np.asarray(channel_weights, float)
         S = float(np.sum(tared(q1.samples - q1.simulate(x1), q1.tare) ** 2 * w))
@@ -160,9 +165,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
             x1, nfev = np.asarray(xp, float), nfev + int(pinfo.get("nfev", 0))
         except Exception as exc:   # the complex's point stands
             log.warning("grow: profile on the first window failed: %s", exc)
-    per_window = STEP_ITERATIONS * (2 * len(problem.free) + 2) + 1
-    if rest:   # the rest's variables freed on the first window, from their start values
-        vals = {**{n: problem.x0[n] for n in rest}, **dict(zip(q1.free, map(float, x1)))}
+    if rest:   # the rest's variables freed on the first window, from the values the complex held
+        vals = {**held, **dict(zip(q1.free, map(float, x1)))}
         q1, x1 = q0, np.array([vals[n] for n in q0.free])
         r1 = refine(q1, x1, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP)
         nfev += r1.nfev   # S stands: the same simulation
@@ -203,16 +207,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
         if keep_points:
             trail[-1]["x"] = x.tolist()
     return x, {"windows": trail, "nfev": nfev, "cpu_s": time.process_time() - t0, "unseen": unseen,
-               "retry": retried, "rest_held": rest}
-
-
-def _without(q, names: Sequence[str]):
-    """q with `names` no longer free: at q's start values (a joint problem's
-    trigger points go together, as its records' own ones follow the first's)."""
-    if isinstance(q, JointProblem):
-        return JointProblem(q.parts, free=[n for n in q.free if n not in names and "@" not in n], x0=q.x0,
-                            name=q.name)
-    return dataclasses.replace(q, free=tuple(n for n in q.free if n not in names))
+               "retry": retried, "rest_held": rest, "rest_fit": held}
 
 
 def records_off(q, sim, w, z: float = RETRY_Z) -> list:

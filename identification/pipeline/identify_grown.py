@@ -75,8 +75,9 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     At the chosen window an identifiable CoR found near its box edge is
     refined again from the edge, kept where f ends lower
     (identification.pipeline.edge_probe; with `uncertainty` and `refine_evals`).
-    `hold_rest`: the complex holds what sets the chain at rest at its start
-    values (growing.grow). `progress`: a bar over the stages (the grown windows, the refinement
+    `hold_rest`: the complex (and the single start's) holds what sets the
+    chain at rest where a fit of it on the first window puts it
+    (growing.grow, identification.pipeline.rest_fit). `progress`: a bar over the stages (the grown windows, the refinement
     and intervals, the shorter windows, the edge probes, each restart), with
     f after each. `workers` (local processes) or `executor` (a Dask
     client's, say): the complex's candidates and the Jacobians' columns side
@@ -204,12 +205,13 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     x_start, started = None, None
     if start == "single" and isinstance(problem, JointProblem) and w is not None:
         x_start, started = single_start(problem, w, evals=int(max_evals), first=first, seed=seed, journal=journal,
-                                        profile_points=PROFILE_POINTS, workers=workers)
+                                        profile_points=PROFILE_POINTS, workers=workers, hold_rest=hold_rest)
     retry, box = None, {}
     if start == "auto" and isinstance(problem, JointProblem) and w is not None:
         def single_retry():
             box["x"], box["info"] = single_start(problem, w, evals=int(max_evals), first=first, seed=seed,
-                                                 journal=journal, profile_points=PROFILE_POINTS, workers=workers)
+                                                 journal=journal, profile_points=PROFILE_POINTS, workers=workers,
+                                                 hold_rest=hold_rest)
             return box["x"], box["info"]["nfev"]
         retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,

@@ -28,57 +28,29 @@ import numpy as np
 from lss_fmu.design import TRIGGER
 from lss_fmu.variables import FORCE_CHANNELS
 
-from ..objective.problem import weighted_residual
 from ..objective.joint import own
 from .growing import grow
+from .rest_fit import trigger_scan
 from ..objective.uncertainty import at_noise
 from .windowing import truncated
 
 log = logging.getLogger(__name__)
 
-COARSE = 41    # trigger points tried over the trigger's bounds ...
-FINE = 11      # ... then over two coarse steps around the best
-
-
-def trigger_scan(part, values: dict, w: np.ndarray, first: float) -> tuple:
-    """(trigger point, S per sample there, simulations): the trigger point of
-    `part` (one record) that fits its first `first` seconds best, the other
-    design variables at `values`, S in the metric `w` (1 / sigma^2 per
-    channel). A point that does not simulate counts as infinitely far."""
-    q = truncated(part, part.times[0] + first)
-    lo, hi = q.bounds[TRIGGER]
-    k = q.free.index(TRIGGER)
-    base = np.array([values[n] for n in q.free], float)
-
-    def S(s: float) -> float:
-        x = base.copy()
-        x[k] = s
-        try:
-            return weighted_residual(q, q.simulate(x), w)[1]
-        except Exception:
-            return np.inf
-    grid = np.linspace(lo, hi, COARSE)
-    vals = [S(s) for s in grid]
-    best = int(np.argmin(vals))
-    h = grid[1] - grid[0]
-    fine = np.linspace(max(lo, grid[best] - h), min(hi, grid[best] + h), FINE)
-    fvals = [S(s) for s in fine]
-    j = int(np.argmin(fvals))
-    s_best, S_best = (fine[j], fvals[j]) if fvals[j] <= vals[best] else (grid[best], vals[best])
-    return float(s_best), float(S_best) / q.samples.size, COARSE + FINE
-
 
 def single_start(problem, w: np.ndarray, *, evals: int, first: float, seed: int,
-                 journal: Optional[Path] = None, profile_points: int = 9, workers: int = 1) -> tuple:
+                 journal: Optional[Path] = None, profile_points: int = 9, workers: int = 1,
+                 hold_rest: bool = False) -> tuple:
     """(x, info): the joint `problem`'s start (module docstring); `w` the
     joint metric (1 / sigma^2 per column, the records side by side); `info`
     the first record's trail, each further record's trigger point and S on
-    its first window, the simulations spent."""
+    its first window, the simulations spent. `hold_rest`: the first
+    record's complex holds its chain at rest (growing.grow)."""
     n = len(FORCE_CHANNELS)
     first_part = problem.parts[0]
     jr = None if journal is None else Path(journal).with_name(Path(journal).stem + ".single.jsonl")
     x0, info = grow(first_part, evals=evals, first=first, seed=seed, journal=jr, channel_weights=w[:n],
-                    profile_points=profile_points, reset_unseen=True, keep_points=True, workers=workers)
+                    profile_points=profile_points, reset_unseen=True, keep_points=True, workers=workers,
+                    hold_rest=hold_rest)
     # its point at the longest window still at the noise: past the onset of chaos the trail is carried
     # off (the first record of one layout-6 fit: 1.03 per sample up to 0.9 s, 7.5 on its whole 2.5 s)
     t0 = float(first_part.times[0])
