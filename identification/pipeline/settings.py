@@ -10,7 +10,7 @@ expert's TOML file to change them, and the record of what a run used.
     shrink = true         # shorter windows while a CoR is rough or the fit above the noise
     tare = true           # zero errors within 3 sigma of the declared offset taken out
     first_window = 0.3    # s: the complex's window
-    hold_rest = false     # the complex holds the pretension and trigger points at their start values
+    hold_rest = true      # the pretension and trigger points fitted first, then held by the complex
     sensitivities = false # Levenberg-Marquardt's Jacobians from the FMU's forward sensitivities (records from rest)
     steady_evals = 600    # a steady record: the complex's evaluations on the statistics objective
     free = ["e_JA", "e_JR", "e_SW", "e_RW", "v_s", "d", "mu_d", "s_M", "K_P", "K_I"]
@@ -47,7 +47,7 @@ class Settings:
     shrink: bool = True
     tare: bool = True
     first_window: float = 0.3
-    hold_rest: bool = False
+    hold_rest: bool = True
     sensitivities: bool = False
     steady_evals: int = 600
     free: tuple = field(default=DESIGN)
