@@ -77,7 +77,8 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     (identification.pipeline.edge_probe; with `uncertainty` and `refine_evals`).
     `hold_rest`: the complex (and the single start's) holds what sets the
     chain at rest where a fit of it on the first window puts it
-    (growing.grow, identification.pipeline.rest_fit). `progress`: a bar over the stages (the grown windows, the refinement
+    (growing.grow, identification.pipeline.rest_fit). `progress`: a bar over
+    the stages (the grown windows, the refinement
     and intervals, the shorter windows, the edge probes, each restart), with
     f after each. `workers` (local processes) or `executor` (a Dask
     client's, say): the complex's candidates and the Jacobians' columns side

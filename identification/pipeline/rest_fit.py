@@ -76,7 +76,8 @@ def trigger_scan(part, values: dict, w: np.ndarray, first: float, *, coarse: int
 
 
 def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
-    """({name: value} of `rest`, simulations): the variables of `rest` (the
+    """({name: value} of `rest`, evaluations: Levenberg-Marquardt's of q, the
+    scan's of one record each): the variables of `rest` (the
     pretension, the trigger points: growing.at_rest) fitted on q's window
     with every other variable at its start value (module docstring):
     Levenberg-Marquardt on the pretension, each trigger point scanned, then
@@ -105,8 +106,10 @@ def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
             np.asarray(channel_weights, float)[k * width:(k + 1) * width]
         pk = dataclasses.replace(part, free=(TRIGGER,), x0={**(part.x0 or {}), **shared})
         span = float(pk.times[-1] - pk.times[0])
-        s, _, n = trigger_scan(pk, {TRIGGER: vals[own(k)]}, w, span, coarse=REST_COARSE, fine=0)
-        vals[own(k)], used = s, used + n
+        s, S, n = trigger_scan(pk, {TRIGGER: vals[own(k)]}, w, span, coarse=REST_COARSE, fine=0)
+        used += n
+        if np.isfinite(S):   # else no point simulated: the value before stands
+            vals[own(k)] = s
     vals, more = _levenberg_marquardt(qr, vals, channel_weights, max_evals)
     return vals, used + more
 
