@@ -47,6 +47,7 @@ N_GROUPS = 8   # motor groups a plant model can drive (drive.n_groups <= N_GROUP
 N_LOAD_PORTS = 2   # item ports (an induction and a chute)
 N_SENS = 10        # forward sensitivities at most (the design vector's length)
 
+
 def sensitivity_output(k: int, channel: str) -> str:
     """The output holding the derivative of force `channel` by the k-th sensitivity's parameter (k from 1)."""
     return f"sensitivity.p{k}.{channel.split('.', 1)[1]}"

@@ -221,3 +221,21 @@ def test_the_settings_switch_reaches_every_record(records):
     off = build_problem(records, "HW", Settings())
     assert on.exact_indices() and off.exact_indices() == ()
     assert all(p.sensitivities for p in on.parts)
+
+
+def test_a_carried_exact_step_is_not_differenced_with_when_the_core_fails(records, monkeypatch):
+    """The steps an exact Jacobian reports for its core columns are the
+    followers' (1e-6 of the range); carried into a Jacobian whose core run
+    failed, those columns are differenced at the default step instead."""
+    from identification.objective import jacobian as jac
+    p, x = _problem(records[0])
+    y = p.simulate(x)
+    w = 1.0 / p.noise ** 2
+    _, used, _ = jacobian(p, x, y, weights=w)
+    span = np.array([b - a for a, b in p.bounds_array])
+    ks = list(p.exact_indices())
+    assert np.allclose(used[ks], jac.EXACT_STEP * span[ks])
+    monkeypatch.setattr(jac, "exact_columns", lambda problem, x: {})   # the core's run failed
+    _, again, rough = jacobian(p, x, y, weights=w, steps=used)
+    assert np.all(again[ks] >= 0.5 * jac.REL_STEP * span[ks]), again[ks] / span[ks]
+    assert np.all(np.isfinite(rough[ks]))

@@ -106,7 +106,12 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
         used[k] = EXACT_STEP * span[k]
     todo = [k for k in range(n) if k not in known]
     first = steps if steps is not None else guess
-    h = np.array([float(first[k]) if first is not None and first[k] > 0 else rel_step * span[k] for k in range(n)])
+    # a carried step at or below the followers' on a column the core can give is that column's last exact step
+    # (its run failed this time): no step to difference with
+    followed = set(problem.exact_indices()) if hasattr(problem, "exact_indices") else set()
+    h = np.array([float(first[k]) if first is not None and first[k] > 0
+                  and not (k in followed and first[k] <= EXACT_STEP * span[k]) else rel_step * span[k]
+                  for k in range(n)])
     sgn = np.where(x + h <= hi, 1.0, -1.0)
     y1 = run({k: at(k, sgn[k] * h[k]) for k in todo})
     if steps is None:
