@@ -248,7 +248,7 @@ def test_windows_shorter_than_the_record_hold_the_rest_and_the_whole_record_free
     """hold_rest: after the first window, each window shorter than the record
     holds the pretension and the trigger points where the window before left
     them, so its Levenberg-Marquardt relaxes no chain anew; the whole record
-    frees them. whole=False stops at the window before the whole record."""
+    frees them."""
     from lss_fmu.runner import ChainSimulator
     jp, _ = _joint(two_records)
     w = 1.0 / np.asarray(jp.noise, float) ** 2
@@ -280,11 +280,6 @@ def test_windows_shorter_than_the_record_hold_the_rest_and_the_whole_record_free
     for _, free, relaxed in shorter:
         assert not set(rest) & set(free) and relaxed == 0, (free, relaxed)
     assert set(rest) <= set(last[1])   # the whole record frees them
-    calls.clear()
-    x, info = growing.grow(jp, evals=15, channel_weights=w, profile_points=1, hold_rest=True, growth=1.45,
-                           whole=False)
-    assert max(c[0] for c in calls) < full - 0.1 and info["windows"][-1]["window_s"] < full - 0.1
-    assert len(x) == len(jp.free)
 
 
 def test_the_rest_fit_finds_the_pretension_and_each_trigger_point_from_another_valley(two_records):

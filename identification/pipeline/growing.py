@@ -95,8 +95,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
          reset_unseen: bool = False, start: Optional[Sequence[float]] = None,
-         retry: Optional[Callable[[], tuple]] = None, workers: int = 1, hold_rest: bool = False,
-         whole: bool = True) -> tuple:
+         retry: Optional[Callable[[], tuple]] = None, workers: int = 1, hold_rest: bool = False) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -136,17 +135,10 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     later window shorter than the record holds them where the window before
     left them: a window's Jacobian then needs no relaxation and a column
     fewer per variable held; the whole record frees them again.
-    `whole`: the last window is the whole record; False stops at the
-    window before it, for a caller whose own Levenberg-Marquardt on the
-    whole record follows (identify_grown's refinement: the same method with
-    a larger budget, which would first difference its Jacobian again at
-    the point the last window ends on).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
     steps = windows(duration, first, growth)
-    if not whole and len(steps) > 1:
-        steps = steps[:-1]
     q = truncated(problem, problem.times[0] + steps[0]) if len(steps) > 1 else problem
     hold = [n for n in hold if n in problem.free]
     rest = [n for n in at_rest(problem) if n not in hold] if hold_rest and start is None else []

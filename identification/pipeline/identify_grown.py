@@ -58,8 +58,7 @@ def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[P
     seconds, the profile there, Levenberg-Marquardt over growing windows in
     the declared noise's metric (the likelihood's; else the first window's
     residual), then `refine_evals` simulations of refinement and the
-    intervals on the whole record (with a refinement the windows stop short
-    of the whole record: the refinement is their last window). `shrink`: shorter windows of `ladder`
+    intervals on the whole record. `shrink`: shorter windows of `ladder`
     while `windowing.troubles` reports any (needs `uncertainty`). Returns an
     identify.IdentificationResult (`grown`: each window's S per sample;
     `windows`: the windows tried when shrinking). `start`: "complex" (the
@@ -218,13 +217,13 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
         retry = single_retry
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start, retry=retry, workers=workers, hold_rest=hold_rest, whole=int(refine_evals) <= 0)
+                   start=x_start, retry=retry, workers=workers, hold_rest=hold_rest)
+    tick("grown", float(info["windows"][-1]["S_per_sample"]) * problem.samples.size)
     if started is not None:
         info["nfev"] += started["nfev"]
     elif info.get("retry") and info["retry"]["taken"]:
         started = box["info"]
     f = float(problem(x))
-    tick("grown", f)
     local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
