@@ -118,6 +118,7 @@ int chain_simd_init(Chain *c, int requested) {
         }
     }
     S->vo_dirty = 1;
+    S->base_dirty = 1;
     S->synced = 0;
     return 0;
 }
@@ -144,6 +145,7 @@ void chain_simd_masses(Chain *c) {
 void chain_simd_invalidate(Chain *c) {
     if (c->simd) {
         c->simd->vo_dirty = 1;
+        c->simd->base_dirty = 1;
         c->simd->synced = 0;
     }
 }
@@ -213,12 +215,15 @@ static void motor_window(Chain *c, int i, double sp0) {
 /* Before every evaluation: the bases of the carts whose axle reached another
  * point of the SIMD_BASE_MOVE grid (one track_frame each; the scalar path
  * builds one per cart and accepted step, at the axle), the chunk kinds and
- * the twisted carts, the contact memory by quantity. */
+ * the twisted carts, the contact memory by quantity. The bases depend on
+ * s_hint alone, which changes only outside evaluations (then
+ * chain_simd_invalidate is called): they are checked once per change, not
+ * in each of a step's six or twelve evaluations. */
 void simd_refresh(Chain *c, const double *y) {
     ChainSimd *S = c->simd;
     const ChainModel *m = &c->m;
     int N = S->N, changed = 0;
-    for (int i = 0; i < N; i++) {
+    for (int i = 0; S->base_dirty && i < N; i++) {
         double sh = c->st.s_hint[i];
         /* the base sits at the grid point of SIMD_BASE_MOVE nearest the axle
          * (a function of the state alone, so that a restored state replays
@@ -238,6 +243,7 @@ void simd_refresh(Chain *c, const double *y) {
                 motor_window(c, i, sp0);
         }
     }
+    S->base_dirty = 0;
     if (changed) {
         for (int i = N; i < S->NP; i++) copy_base(S, 0, i);
         int nt = 0;

@@ -93,6 +93,7 @@ typedef struct ChainSimd {
     int *fix;                         /* [N] carts for the scalar code */
     int n_fix_twisted;                /* fix[0 .. n_fix_twisted) sit on twisted elements */
     int vo_dirty;                     /* v_onset changed since the mirror was taken */
+    int base_dirty;                   /* s_hint may have changed since the bases were checked */
     int synced;                       /* the scalar scratch holds the last evaluation */
 } ChainSimd;
 
