@@ -66,6 +66,8 @@ int chain_simd_init(Chain *c, int requested) {
     S->N = N;
     S->NW = NW;
     S->NP = NP;
+    S->ir_drive = 1.0 / c->m.g.r_drive;
+    S->ir_steer = 1.0 / c->m.g.r_steer;
     uintptr_t a = ((uintptr_t)(S + 1) + 63) & ~(uintptr_t)63;
     double *p = (double *)a;
     for (int k = 0; k < CART_NY; k++) S->Y[k] = take(&p, NP);

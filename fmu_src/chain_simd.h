@@ -94,6 +94,7 @@ typedef struct ChainSimd {
     int n_fix_twisted;                /* fix[0 .. n_fix_twisted) sit on twisted elements */
     int vo_dirty;                     /* v_onset changed since the mirror was taken */
     int base_dirty;                   /* s_hint may have changed since the bases were checked */
+    double ir_drive, ir_steer;        /* 1 / wheel radius (no division per chunk) */
     int synced;                       /* the scalar scratch holds the last evaluation */
 } ChainSimd;
 

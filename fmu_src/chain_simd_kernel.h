@@ -104,14 +104,19 @@ KI V vpow(V d, double n) {
     return t.v;
 }
 
+/* The impact velocity v_i of contact_vi: the onset velocity where one is
+ * remembered, else the closing rate floored at v_min (> 0 either way). */
+KI V vimpact(V vo, V ddelta, double v_min) { return vsel(vgt(vo, vzero()), vo, vmax(ddelta, vset(v_min))); }
+
 /* Hunt-Crossley force of the lanes with delta > 0 (contact_force with
- * contact_vi): fn, and the elastic part fe (both 0 where open). */
-KI void vcontact(const ContactLaw *law, V delta, V ddelta, V vo, double v_min, V *fn, V *fe) {
+ * contact_vi), given 1 / v_i: fn, and the elastic part fe (both 0 where
+ * open). The callers share one division among this and their other
+ * reciprocals: the divider, not the multipliers, bounds these kernels. */
+KI void vcontact(const ContactLaw *law, V delta, V ddelta, V ivi, V *fn, V *fe) {
     M on = vgt(delta, vzero());
     V d = vmax(delta, vzero());
     V e = vset(law->K) * vpow(d, law->n);
-    V vi = vsel(vgt(vo, vzero()), vo, vmax(ddelta, vset(v_min)));
-    V f = e * vfma(vset(law->chi), ddelta / vi, vset(1.0));
+    V f = e * vfma(vset(law->chi), ddelta * ivi, vset(1.0));
     *fn = vand(on, vmax(f, vzero()));
     *fe = vand(on, e);
 }
@@ -158,16 +163,21 @@ KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int ex
     V x = vfma(ds, c0, q0);
     V rk = vfms(k, vfma(ds, cm, qm), one);
     M good = vgt(rk, vzero());
-    V z = k * x / rk, z2 = z * z;
+    V xr = x * (one / rk);
+    V z = k * xr, z2 = z * z;
     good = mand(good, vlt(z2, vset(1e-2)));
     V T = vfms(z2, vfms(z2, vfms(z2, vfms(z2, vset(1.0 / 9), vset(1.0 / 7)), vset(1.0 / 5)), vset(1.0 / 3)), one);
-    ds = x / rk * T;
+    ds = xr * T;
     x = vfma(ds, c0, q0);
     rk = vfms(k, vfma(ds, cm, qm), one);
     V kx = k * x;
-    V rr = one / vsqrt(vfma(kx, kx, rk * rk));
+    /* rr = 1 / sq, ic = 1 / (1 + C) = sq / (sq + rk) and (exact) 1 / rk from
+     * one division: 1 / (sq (sq + rk) [rk]); all near 1 where the lane is good */
+    V sq = vsqrt(vfma(kx, kx, rk * rk)), sp = sq + rk, P = sq * sp;
+    V inv = one / (exact ? (V)(P * rk) : P);
+    V rr = exact ? (V)(sp * rk * inv) : (V)(sp * inv);
     V Sn = kx * rr, C = rk * rr, Sik = x * rr;
-    V ic = one / (one + C);
+    V ic = exact ? (V)(sq * sq * rk * inv) : (V)(sq * sq * inv);
     V C1 = Sn * Sn * ic, C1ik = Sn * Sik * ic;
     V Suy = Sn * uy, Suz = Sn * uz, C1uy = C1 * uy, C1uz = C1 * uz, C1yz = C1uy * uz;
     f->E[0] = C;    f->E[1] = -Suz;               f->E[2] = Suy;
@@ -177,7 +187,8 @@ KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int ex
     f->d1 = dot3(f->E[1], f->E[4], f->E[7], r0, r1, r2);
     f->d2 = dot3(f->E[2], f->E[5], f->E[8], r0, r1, r2);
     if (exact) {
-        z = kx / rk;
+        V xr1 = x * (P * inv);
+        z = k * xr1;
         z2 = z * z;
         good = mand(good, vlt(z2, vset(1e-2)));
         V Tf = vset(1.0 / 15);
@@ -188,7 +199,7 @@ KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int ex
         Tf = vfms(z2, Tf, vset(1.0 / 5));
         Tf = vfms(z2, Tf, vset(1.0 / 3));
         Tf = vfms(z2, Tf, one);
-        ds = x / rk * Tf;
+        ds = xr1 * Tf;
     }
     *ok = mand(*ok, mand(good, mand(vge(ds, vld(S->lo + i)), vlt(ds, vld(S->hi + i)))));
     f->ds = ds;
@@ -278,7 +289,7 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
         ddelta = vset(side) * vfn;
     }
     V vt = vf0;
-    vst(S->ws[k] + i, vt * vset(1.0 / r));
+    vst(S->ws[k] + i, vt * vset(drive ? S->ir_drive : S->ir_steer));
     V slope = vzero();
     if (drive && SURF) {
         Lanes a_ds = {.v = f.ds}, a_d1 = {.v = f.d1}, a_d2 = {.v = f.d2}, a_vt = {.v = vt}, a_dh, a_sl;
@@ -287,10 +298,13 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
         delta = delta + a_dh.v;
         ddelta = vfma(slope, vt, ddelta);
     }
+    /* 1 / v_i and 1 / sqrt(vt^2 + 1e-4) from one division */
+    V vi = vimpact(vld(S->voW[k] + i), ddelta, m->v_min), sd = vsqrt(vfma(vt, vt, vset(1e-4)));
+    V inv = vset(1.0) / (vi * sd);
     V fn, fe;
-    vcontact(&m->law[drive ? CC_RW : CC_SW], delta, ddelta, vld(S->voW[k] + i), m->v_min, &fn, &fe);
+    vcontact(&m->law[drive ? CC_RW : CC_SW], delta, ddelta, sd * inv, &fn, &fe);
     acc->pd = vfma(fn - fe, ddelta, acc->pd);
-    V sg = vt / vsqrt(vfma(vt, vt, vset(1e-4))), froll = vset(m->mu_roll) * fn;
+    V sg = vt * (vi * inv), froll = vset(m->mu_roll) * fn;
     V fsg = froll * sg;
     acc->pr = vfma(fsg, vt, acc->pr);
     /* ff = dir fn - froll sg t; dir = b (driving) or -side n (guide); fv = E ff, db = E dir */
@@ -475,15 +489,21 @@ static void k_joints(Chain *c) {
         V sgn = vsel(vge(Da, zero), vset(1.0), vset(-1.0));
         /* axial */
         V da = vabs(Da) - gap, dda = sgn * Dadot, fa, fea;
-        vcontact(&m->law[CC_JA], da, dda, vld(S->voJ[0] + j), m->v_min, &fa, &fea);
-        V pd = (fa - fea) * dda;
+        V via = vimpact(vld(S->voJ[0] + j), dda, m->v_min);
         /* radial */
         M valid = vgt(rho, vset(1e-15));
-        V irho = vset(1.0) / vsel(valid, rho, vset(1.0)), u[3];
+        V rv = vsel(valid, rho, vset(1.0));
+        /* 1 / rho first (the radial closing rate needs it), then both 1 / v_i
+         * from one more division */
+        V irho = vset(1.0) / rv, u[3];
         for (int k = 0; k < 3; k++) u[k] = vand(valid, Dr[k] * irho);
         V ddr = vfms(Da, dot3(u[0], u[1], u[2], adot[0], adot[1], adot[2]), dot3(u[0], u[1], u[2], Dd[0], Dd[1], Dd[2]));
+        V vir = vimpact(vld(S->voJ[1] + j), ddr, m->v_min);
+        V inv = vset(1.0) / (via * vir);
+        vcontact(&m->law[CC_JA], da, dda, vir * inv, &fa, &fea);
+        V pd = (fa - fea) * dda;
         V dr = rho - gap, fr, fer;
-        vcontact(&m->law[CC_JR], vand(valid, dr), ddr, vld(S->voJ[1] + j), m->v_min, &fr, &fer);
+        vcontact(&m->law[CC_JR], vand(valid, dr), ddr, via * inv, &fr, &fer);
         pd = vfma(fr - fer, ddr, pd);
         /* force on A at pF, the opposite on B at pR */
         V f[3], sfa = sgn * fa;
