@@ -368,6 +368,28 @@ void simd_finish(Chain *c, const double *y, double *dy, double F_cmd, double zdo
     S->synced = 0;
 }
 
+int chain_simd_accept(Chain *c) {
+    ChainSimd *S = c->simd;
+    ChainState *st = &c->st;
+    const double v_min = c->m.v_min;
+    int changed = 0;
+    for (int i = 0; i < S->N; i++) {
+        int k0 = N_SLOT * i;
+        st->s_hint[i] = S->s[i];
+        for (int k = 0; k < 2; k++) {
+            changed |= contact_memory_slot(st, v_min, k0 + k, S->jd[k][i + 1], S->jdd[k][i + 1]);
+            S->voJ[k][i] = st->v_onset[k0 + k];
+        }
+        for (int k = 0; k < N_WHEEL; k++) {
+            int slot = k0 + SLOT_WHEEL + k;
+            changed |= contact_memory_slot(st, v_min, slot, S->wd[k][i], S->wdd[k][i]);
+            S->voW[k][i] = st->v_onset[slot];
+        }
+    }
+    S->base_dirty = 1;  /* s_hint moved; the mirror of v_onset is current */
+    return changed;
+}
+
 void chain_simd_sync(Chain *c) {
     ChainSimd *S = c->simd;
     if (!S || S->synced) return;

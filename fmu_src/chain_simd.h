@@ -112,6 +112,12 @@ void chain_simd_free(Chain *c);
 void chain_simd_invalidate(Chain *c);
 /* The per-cart masses and moments of the vector path from the model's (they change with the items). */
 void chain_simd_masses(Chain *c);
+/* After an accepted step, from the last evaluation (at the new point): the
+ * track hints and the contact memory (ChainState) straight from the vector
+ * arrays, the mirror of the memory kept with it; the scalar scratch is
+ * filled only when asked (chain_simd_sync). Returns 1 if the right-hand
+ * side at the new point changed (update_contact_memory's rule). */
+int chain_simd_accept(Chain *c);
 /* Fills the scalar scratch from the last vector evaluation (no-op on the
  * scalar path or when done). */
 void chain_simd_sync(Chain *c);

@@ -8,6 +8,8 @@
 #endif
 
 #include <immintrin.h>
+#include <stdint.h>
+#include <string.h>
 
 #define KI static inline __attribute__((always_inline))
 
@@ -563,8 +565,11 @@ static void k_gather(ChainSimd *S, const double *y) {
     }
     for (; i < N; i++)
         for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[CART_NY * i + k];
-    for (i = N; i < S->NP; i++)
-        for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[k];
+    /* quantity by quantity: each a run of equal values (vector stores) */
+    for (int k = 0; k < CART_NY; k++) {
+        double *Yk = S->Y[k], v = y[k];
+        for (i = N; i < S->NP; i++) Yk[i] = v;
+    }
 }
 
 /* columns d[13] of 4 carts (n of them real) into their rows of dy */
@@ -592,6 +597,33 @@ KI void scatter4(double *dy, const __m256d *d, int n) {
         for (int k = 0; k < CART_NY; k++) dy[CART_NY * l + k] = tmp[k].d[l];
 }
 
+#if VW == 8
+/* Half hf (carts 4 hf .. 4 hf + 3) of a full chunk of 8 into its rows of dy:
+ * scatter4 on the 256-bit halves, taken straight from the registers. */
+KI void scatter8_half(double *dy, const V *d, const int hf) {
+    double *r0 = dy + CART_NY * 4 * hf;
+    for (int c0 = 0; c0 < 12; c0 += 4) {
+        __m256d row[4];
+        if (hf)
+            tr4(_mm512_extractf64x4_pd(d[c0], 1), _mm512_extractf64x4_pd(d[c0 + 1], 1),
+                _mm512_extractf64x4_pd(d[c0 + 2], 1), _mm512_extractf64x4_pd(d[c0 + 3], 1), row);
+        else
+            tr4(_mm512_castpd512_pd256(d[c0]), _mm512_castpd512_pd256(d[c0 + 1]), _mm512_castpd512_pd256(d[c0 + 2]),
+                _mm512_castpd512_pd256(d[c0 + 3]), row);
+        _mm256_storeu_pd(r0 + c0, row[0]);
+        _mm256_storeu_pd(r0 + CART_NY + c0, row[1]);
+        _mm256_storeu_pd(r0 + 2 * CART_NY + c0, row[2]);
+        _mm256_storeu_pd(r0 + 3 * CART_NY + c0, row[3]);
+    }
+    __m256d q = hf ? _mm512_extractf64x4_pd(d[12], 1) : _mm512_castpd512_pd256(d[12]);
+    __m128d lo = _mm256_castpd256_pd128(q), hi = _mm256_extractf128_pd(q, 1);
+    _mm_storel_pd(r0 + 12, lo);
+    _mm_storeh_pd(r0 + CART_NY + 12, lo);
+    _mm_storel_pd(r0 + 2 * CART_NY + 12, hi);
+    _mm_storeh_pd(r0 + 3 * CART_NY + 12, hi);
+}
+#endif
+
 /* --- 6. forces summed, Newton-Euler (cart.c cart_derivatives), into dy ----- */
 /* The motors (drive.c drive_forces) with the candidates of chain_simd.c:
  * thrust F_cmd times the covered share of each candidate motor, along t at
@@ -608,7 +640,9 @@ KI void v_drive(Chain *c, int i, double F_cmd, const V *Rm, V *F, V *T, V *Ftot,
     V Fm = vset(F_cmd) * frac;
     M inw = mand(vge(sp, vld(S->mlo + i)), vge(vld(S->mhi + i), sp));
     int bad = ~mbits(inw) & MALL;
-    for (int l = 0; l < VW && l < S->N - i; l++)
+    uint64_t full = 0;  /* the chunk's flags at once (mfull has NP >= i + VW bytes) */
+    memcpy(&full, S->mfull + i, VW);
+    for (int l = 0; full && l < VW && l < S->N - i; l++)
         if (S->mfull[i + l]) bad |= 1 << l;
     bad &= (S->N - i >= VW) ? MALL : (1 << (S->N - i)) - 1;
     if (bad) {
@@ -672,6 +706,11 @@ static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
 #if VW == 4
         scatter4(dy + CART_NY * i, d, n);
 #else
+        if (n == VW) {
+            scatter8_half(dy + CART_NY * i, d, 0);
+            scatter8_half(dy + CART_NY * i, d, 1);
+            continue;
+        }
         __m256d h[CART_NY];
         for (int k = 0; k < CART_NY; k++) h[k] = _mm512_castpd512_pd256(d[k]);
         scatter4(dy + CART_NY * i, h, n < 4 ? n : 4);
