@@ -295,9 +295,9 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     if (drive) {
         delta = vset(r) - f.d2;
         ddelta = -vfn;
-    } else {
-        delta = vfma(vset(side), f.d1 - vset(h), vset(r));
-        ddelta = vset(side) * vfn;
+    } else {  /* side is +-1: signs flipped, not multiplied (the same bits) */
+        delta = side > 0 ? (V)(vset(r) + (f.d1 - vset(h))) : (V)(vset(r) - (f.d1 - vset(h)));
+        ddelta = side > 0 ? vfn : (V)(-vfn);
     }
     V vt = vf0;
     vst(S->ws[k] + i, vt * vset(drive ? S->ir_drive : S->ir_steer));
@@ -319,25 +319,25 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     V fsg = froll * sg;
     acc->pr = vfma(fsg, vt, acc->pr);
     /* ff = dir fn - froll sg t; dir = b (driving) or -side n (guide); fv = E ff, db = E dir */
-    V fv[3], db[3];
-    V fx = -fsg, fd = drive ? fn : (V)(vset(-side) * fn);
+    /* arm = rc - r db: a sign flip of db taken into the fused operation, and
+     * the straight code's zero components left out (the same bits) */
+    V fv[3], arm[3];
+    V fx = -fsg, fd = drive ? fn : (side > 0 ? (V)(-fn) : fn);
     if (ARC) {
         const int cd = drive ? 2 : 1;
         for (int j = 0; j < 3; j++) {
             V e0 = f.E[3 * j], ed = f.E[3 * j + cd];
             fv[j] = vfma(e0, fx, ed * fd);
-            db[j] = drive ? ed : (V)(vset(-side) * ed);
+            arm[j] = (!drive && side > 0) ? vfma(vset(r), ed, rc[j]) : vfms(vset(r), ed, rc[j]);
         }
     } else {
         fv[0] = fx;
         fv[1] = drive ? vzero() : fd;
         fv[2] = drive ? fd : vzero();
-        db[0] = vzero();
-        db[1] = drive ? vzero() : vset(-side);
-        db[2] = drive ? vset(1.0) : vzero();
+        arm[0] = rc[0];
+        arm[1] = drive ? rc[1] : (V)(rc[1] + vset(side * r));
+        arm[2] = drive ? (V)(rc[2] - vset(r)) : rc[2];
     }
-    V arm[3];
-    for (int j = 0; j < 3; j++) arm[j] = vfms(vset(r), db[j], rc[j]);
     for (int j = 0; j < 3; j++) acc->F[j] = acc->F[j] + fv[j];
     acc->T[0] = acc->T[0] + crx(arm[1], arm[2], fv[1], fv[2]);
     acc->T[1] = acc->T[1] + crx(arm[2], arm[0], fv[2], fv[0]);
