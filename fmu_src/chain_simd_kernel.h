@@ -574,10 +574,12 @@ static void k_gather(ChainSimd *S, const double *y) {
     }
     for (; i < N; i++)
         for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[CART_NY * i + k];
-    /* quantity by quantity: each a run of equal values (vector stores) */
+    /* quantity by quantity, [N, NP) by two overlapping vector stores (NP - N
+     * is from W to 2W) */
     for (int k = 0; k < CART_NY; k++) {
-        double *Yk = S->Y[k], v = y[k];
-        for (i = N; i < S->NP; i++) Yk[i] = v;
+        V v = vset(y[k]);
+        vst(S->Y[k] + N, v);
+        vst(S->Y[k] + S->NP - VW, v);
     }
 }
 
