@@ -252,10 +252,18 @@ void simd_refresh(Chain *c, const double *y) {
         for (int i = 0; i < N; i++)
             if (S->kind[i] == TL_TWISTED) S->fix[nt++] = i;
         S->n_fix_twisted = nt;
+        /* the code each chunk takes (chain_simd_kernel.h, ARC): 0 straight; 1 any
+         * plane arc; 2 arcs about b alone (uy = 0); 3 about n alone (uz = 0).
+         * Carts on twisted elements count for none: the scalar code redoes them. */
         for (int a = 0; a < S->NW; a += S->W) {
-            int arc = 0;
-            for (int l = a; l < a + S->W && l < N; l++) arc |= S->kind[l] != TL_STRAIGHT;
-            S->chunk[a / S->W] = (unsigned char)arc;
+            int arc = 0, off_b = 0, off_n = 0;
+            for (int l = a; l < a + S->W && l < N; l++) {
+                if (S->kind[l] != TL_PLANAR) continue;
+                arc = 1;
+                off_b |= S->uy[l] != 0.0;
+                off_n |= S->uz[l] != 0.0;
+            }
+            S->chunk[a / S->W] = (unsigned char)(!arc ? 0 : !off_b ? 2 : !off_n ? 3 : 1);
         }
     }
     if (S->vo_dirty) {

@@ -89,7 +89,7 @@ typedef struct ChainSimd {
     double *mlo, *mhi, *ms0[SIMD_NMOT], *ms1[SIMD_NMOT], *mil[SIMD_NMOT];
     unsigned char *mfull;             /* [NP] more motors than SIMD_NMOT: the scalar walk */
     unsigned char *kind;              /* [NP] TL_* of each base */
-    unsigned char *chunk;             /* [NW / W] 0: all straight; 1: arc code */
+    unsigned char *chunk;             /* [NW / W] 0: straight code; 1, 2, 3: arc code (any, about b, about n) */
     int *fix;                         /* [N] carts for the scalar code */
     int n_fix_twisted;                /* fix[0 .. n_fix_twisted) sit on twisted elements */
     int vo_dirty;                     /* v_onset changed since the mirror was taken */

@@ -160,17 +160,40 @@ typedef struct {
     V d1, d2, ds;
 } VFrame;
 
+/* The arc code in three forms (ARC below): 1 any plane arc; 2 the chunk's
+ * arcs turn about the base's b (uy = 0: curves in the track's plane); 3
+ * about its n (uz = 0: vertical curves). Straights (k = 0, u = 0) fit all
+ * three. On the last two, four entries of E are 0 and one is 1 by
+ * construction, and the products with them are left out: the same bits
+ * but for the sign of a zero (13 to 21 fewer multiplications a wheel). */
+KI int e_zero(const int ARC, const int j) {
+    return ARC == 2 ? (j == 2 || j == 5 || j == 6 || j == 7) : ARC == 3 ? (j == 1 || j == 3 || j == 5 || j == 7) : 0;
+}
+KI int e_one(const int ARC, const int j) { return ARC == 2 ? j == 8 : ARC == 3 ? j == 4 : 0; }
+/* E_j x, and acc + E_j x (as vfma(E_j, x, acc)) */
+KI V emul(const int ARC, const VFrame *f, const int j, V x) {
+    return e_zero(ARC, j) ? vzero() : e_one(ARC, j) ? x : (V)(f->E[j] * x);
+}
+KI V emad(const int ARC, const VFrame *f, const int j, V x, V acc) {
+    return e_zero(ARC, j) ? acc : e_one(ARC, j) ? (V)(acc + x) : vfma(f->E[j], x, acc);
+}
+/* column c of E dotted with (v0, v1, v2), in dot3's order */
+KI V ecol(const int ARC, const VFrame *f, const int c, V v0, V v1, V v2) {
+    return emad(ARC, f, c, v0, emad(ARC, f, 3 + c, v1, emul(ARC, f, 6 + c, v2)));
+}
+
 /* tl_project_planar in terms of the curvature k (k = 0: a straight, where
  * it gives E = I and d = q + ds chat, the straight's result): from the
  * guess, one round of the fixed point ds = atan(k x / (1 - k q.m)) / k, then
  * the frame at that ds. ok loses the lanes that would need atan2 (|z| >=
  * 0.1) or leave the element (the scalar code takes those). With exact
  * (the axle) ds is recomputed from the final (x, rho) by the longer series. */
-KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int exact, VFrame *f, M *ok) {
+KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int exact, const int ARC, VFrame *f,
+                 M *ok) {
     V k = vld(S->k + i), uy = vld(S->uy + i), uz = vld(S->uz + i), cm = vld(S->cm + i);
     V c0 = vld(S->ch[0] + i), c1 = vld(S->ch[1] + i), c2 = vld(S->ch[2] + i);
     V one = vset(1.0);
-    V qm = vfms(q2, uy, q1 * uz);
+    V qm = ARC == 2 ? (V)(q1 * uz) : ARC == 3 ? (V)(-(q2 * uy)) : vfms(q2, uy, q1 * uz);
     V x = vfma(ds, c0, q0);
     V rk = vfms(k, vfma(ds, cm, qm), one);
     M good = vgt(rk, vzero());
@@ -194,9 +217,11 @@ KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int ex
     f->E[0] = C;    f->E[1] = -Suz;               f->E[2] = Suy;
     f->E[3] = Suz;  f->E[4] = vfms(C1uz, uz, one); f->E[5] = C1yz;
     f->E[6] = -Suy; f->E[7] = C1yz;               f->E[8] = vfms(C1uy, uy, one);
-    V r0 = x - Sik, r1 = vfms(C1ik, uz, vfma(ds, c1, q1)), r2 = vfma(C1ik, uy, vfma(ds, c2, q2));
-    f->d1 = dot3(f->E[1], f->E[4], f->E[7], r0, r1, r2);
-    f->d2 = dot3(f->E[2], f->E[5], f->E[8], r0, r1, r2);
+    V r0 = x - Sik;
+    V r1 = ARC == 3 ? vfma(ds, c1, q1) : vfms(C1ik, uz, vfma(ds, c1, q1));
+    V r2 = ARC == 2 ? vfma(ds, c2, q2) : vfma(C1ik, uy, vfma(ds, c2, q2));
+    f->d1 = ecol(ARC, f, 1, r0, r1, r2);
+    f->d2 = ecol(ARC, f, 2, r0, r1, r2);
     if (exact) {
         V xr1 = x * (P * inv);
         z = k * xr1;
@@ -282,9 +307,9 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     VFrame f;
     V vf0, vfn;  /* velocity along t, and along the normal (b for a driving wheel, n for a guide) */
     if (ARC) {
-        proj_arc(S, i, q[0], q[1], q[2], ds_axle, 0, &f, ok);
-        vf0 = dot3(f.E[0], f.E[3], f.E[6], v[0], v[1], v[2]);
-        vfn = drive ? dot3(f.E[2], f.E[5], f.E[8], v[0], v[1], v[2]) : dot3(f.E[1], f.E[4], f.E[7], v[0], v[1], v[2]);
+        proj_arc(S, i, q[0], q[1], q[2], ds_axle, 0, ARC, &f, ok);
+        vf0 = ecol(ARC, &f, 0, v[0], v[1], v[2]);
+        vfn = ecol(ARC, &f, drive ? 2 : 1, v[0], v[1], v[2]);
     } else {
         proj_straight(S, i, q[0], q[1], q[2], &f, ok);
         vf0 = v[0];
@@ -326,9 +351,15 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     if (ARC) {
         const int cd = drive ? 2 : 1;
         for (int j = 0; j < 3; j++) {
-            V e0 = f.E[3 * j], ed = f.E[3 * j + cd];
-            fv[j] = vfma(e0, fx, ed * fd);
-            arm[j] = (!drive && side > 0) ? vfma(vset(r), ed, rc[j]) : vfms(vset(r), ed, rc[j]);
+            const int jd = 3 * j + cd;
+            V ed = f.E[jd];
+            fv[j] = emad(ARC, &f, 3 * j, fx, emul(ARC, &f, jd, fd));
+            if (e_zero(ARC, jd))
+                arm[j] = rc[j];
+            else if (e_one(ARC, jd))
+                arm[j] = (!drive && side > 0) ? (V)(rc[j] + vset(r)) : (V)(rc[j] - vset(r));
+            else
+                arm[j] = (!drive && side > 0) ? vfma(vset(r), ed, rc[j]) : vfms(vset(r), ed, rc[j]);
         }
     } else {
         fv[0] = fx;
@@ -345,7 +376,7 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     if (drive && SURF) {
         /* the slope's tangential force through the wheel centre */
         V ft = -(fn * slope), tv[3];
-        for (int j = 0; j < 3; j++) tv[j] = ARC ? (V)(f.E[3 * j] * ft) : (j == 0 ? ft : vzero());
+        for (int j = 0; j < 3; j++) tv[j] = ARC ? emul(ARC, &f, 3 * j, ft) : (j == 0 ? ft : vzero());
         for (int j = 0; j < 3; j++) acc->F[j] = acc->F[j] + tv[j];
         acc->T[0] = acc->T[0] + crx(rc[1], rc[2], tv[1], tv[2]);
         acc->T[1] = acc->T[1] + crx(rc[2], rc[0], tv[2], tv[0]);
@@ -396,11 +427,10 @@ KI int k_chunk(Chain *c, int i, const int ARC, const int SURF) {
     va[2] = Lv[2] + crx(om[0], om[1], ra[0], ra[1]);
     M ok = vgt(vset(1.0), vzero());
     VFrame af;
-    V tl[3], vt;
+    V vt;
     if (ARC) {
-        proj_arc(S, i, qa[0], qa[1], qa[2], vzero(), 1, &af, &ok);
-        tl[0] = af.E[0]; tl[1] = af.E[3]; tl[2] = af.E[6];
-        vt = dot3(va[0], va[1], va[2], tl[0], tl[1], tl[2]);
+        proj_arc(S, i, qa[0], qa[1], qa[2], vzero(), 1, ARC, &af, &ok);
+        vt = ecol(ARC, &af, 0, va[0], va[1], va[2]);  /* va . tl, tl = E's column t */
     } else {
         proj_straight(S, i, qa[0], qa[1], qa[2], &af, &ok);
         vt = va[0];
@@ -411,7 +441,8 @@ KI int k_chunk(Chain *c, int i, const int ARC, const int SURF) {
     vst(S->vt + i, vt);
     V t[3];
     for (int j = 0; j < 3; j++) {
-        t[j] = ARC ? dot3(bR[3 * j], bR[3 * j + 1], bR[3 * j + 2], tl[0], tl[1], tl[2]) : bR[3 * j];
+        t[j] = ARC ? emad(ARC, &af, 0, bR[3 * j], emad(ARC, &af, 3, bR[3 * j + 1], emul(ARC, &af, 6, bR[3 * j + 2])))
+                   : bR[3 * j];  /* bR's row j . tl */
         vst(S->t[j] + i, t[j]);
     }
     VSum acc;
@@ -452,6 +483,8 @@ KI int k_chunk(Chain *c, int i, const int ARC, const int SURF) {
 
 static void k_wheels_straight(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 0, 0); }
 static void k_wheels_arc(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 1, 0); }
+static void k_wheels_arc_b(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 2, 0); }
+static void k_wheels_arc_n(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 3, 0); }
 static void k_wheels_straight_surf(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 0, 1); }
 static void k_wheels_arc_surf(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 1, 1); }
 
@@ -763,8 +796,11 @@ void SIMD_ENTRY(Chain *c, const double *y, double *dy) {
     int nfix = S->n_fix_twisted, surf = m->fx.surface_on;
     for (int i = 0; i < S->NW; i += VW) {
         int bad;
-        if (S->chunk[i / VW]) {
+        int kind = S->chunk[i / VW];
+        if (kind) {
             if (surf) k_wheels_arc_surf(c, i, &bad);
+            else if (kind == 2) k_wheels_arc_b(c, i, &bad);
+            else if (kind == 3) k_wheels_arc_n(c, i, &bad);
             else k_wheels_arc(c, i, &bad);
         } else {
             if (surf) k_wheels_straight_surf(c, i, &bad);
