@@ -354,11 +354,7 @@ void simd_finish(Chain *c, const double *y, double *dy, double F_cmd, double zdo
     ChainScratch *sc = &c->sc;
     int N = S->N, tr = m->transducer;
     (void)y;
-    double pd = 0.0, pr = 0.0;
-    for (int i = 0; i < N; i++) {
-        pd += S->pdw[i] + S->pdj[i + 1];
-        pr += S->prw[i];
-    }
+    double pd = S->p_damp, pr = S->p_roll;  /* summed by the last kernel */
     double f[3] = {S->jf[0][tr + 1], S->jf[1][tr + 1], S->jf[2][tr + 1]}, RA[9];
     for (int k = 0; k < 9; k++) RA[k] = S->R[k][tr];
     m3_tmulv(sc->jointF, RA, f);

@@ -77,6 +77,7 @@ typedef struct ChainSimd {
     double *ws[N_WHEEL];              /* wheel speeds */
     double *wd[N_WHEEL], *wdd[N_WHEEL], *wf[N_WHEEL];  /* indentation, rate, force */
     double *pdw, *prw;                /* damping and rolling power per cart */
+    double p_damp, p_roll;            /* their sums over the carts (with the joints' damping) */
     /* joints: joint j (cart j's front, cart j+1's rear) at index j + 1; index 0 is joint N-1 */
     double *jf[3], *jTA[3], *jTB[3];  /* force on cart j, torque on cart j, torque on cart j+1 */
     double *jd[2], *jdd[2], *jfn[2];  /* axial, radial: indentation, rate, force */

@@ -719,8 +719,19 @@ KI void v_drive(Chain *c, int i, double F_cmd, const V *Rm, V *F, V *T, V *Ftot,
 
 static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
     ChainSimd *S = c->simd;
-    V Ftot = vzero(), Ptot = vzero();
+    V Ftot = vzero(), Ptot = vzero(), Pd = vzero(), Pr = vzero();
     for (int i = 0; i < S->NW; i += VW) {
+        {  /* the damping and rolling powers summed here, lane by lane (the padding left out) */
+            V pd = vld(S->pdw + i) + vld(S->pdj + i + 1), pr = vld(S->prw + i);
+            if (S->N - i < VW) {
+                Lanes a = {.v = pd}, b = {.v = pr};
+                for (int l = S->N - i; l < VW; l++) a.d[l] = b.d[l] = 0.0;
+                pd = a.v;
+                pr = b.v;
+            }
+            Pd = Pd + pd;
+            Pr = Pr + pr;
+        }
         V F[3], T[3], Rm[9];
         for (int k = 0; k < 3; k++) {
             F[k] = vld(S->Fw[k] + i) + vld(S->jf[k] + i + 1) - vld(S->jf[k] + i);
@@ -774,6 +785,14 @@ static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
         c->sc.F_total = ft;
         c->sc.P_total = pt;
     }
+    Lanes a = {.v = Pd}, b = {.v = Pr};
+    double pd = 0.0, pr = 0.0;
+    for (int l = 0; l < VW; l++) {
+        pd += a.d[l];
+        pr += b.d[l];
+    }
+    S->p_damp = pd;
+    S->p_roll = pr;
 }
 
 static double vsum_range(const double *a, int n) {
