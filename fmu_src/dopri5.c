@@ -188,28 +188,51 @@ static const double D8_B[8] = {0.054293734116568765, 4.450312892752409, 1.891517
 static const double D8_E5[8] = {0.01312004499419488, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294};
 static const double D8_E3[8] = {-0.18980075407240762, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082};
 
-/* o (+)= a0 k0 + a1 k1 + a2 k2 (+ a3 k3) in one pass; first: o = y + ... */
-STAGE_CLONES static void acc4(int n, double *restrict o, const double *restrict y, int first, int na,
-                              const double *a, const double *restrict k0, const double *restrict k1,
-                              const double *restrict k2, const double *restrict k3) {
-    double a0 = a[0], a1 = na > 1 ? a[1] : 0.0, a2 = na > 2 ? a[2] : 0.0, a3 = na > 3 ? a[3] : 0.0;
-    if (first && na == 4)
-        for (int i = 0; i < n; i++) o[i] = y[i] + (a0 * k0[i] + a1 * k1[i] + a2 * k2[i] + a3 * k3[i]);
-    else if (first)
-        for (int i = 0; i < n; i++) o[i] = y[i] + (a0 * k0[i] + a1 * k1[i] + a2 * k2[i]);
-    else if (na == 4)
-        for (int i = 0; i < n; i++) o[i] += a0 * k0[i] + a1 * k1[i] + a2 * k2[i] + a3 * k3[i];
-    else
-        for (int i = 0; i < n; i++) o[i] += a0 * k0[i] + a1 * k1[i] + a2 * k2[i];
-}
-
-/* o = y + sum_j a_j k_j over the listed stages (na of them), four per pass */
-static void combn(int n, double *o, const double *y, int na, const double *a, double *const *k) {
-    for (int j = 0; j < na; j += 4) {
-        int m = na - j < 4 ? na - j : 4;
-        const double *k1 = m > 1 ? k[j + 1] : k[j], *k2 = m > 2 ? k[j + 2] : k[j], *k3 = m > 3 ? k[j + 3] : k[j];
-        acc4(n, o, y, j == 0, m, a + j, k[j], k1, k2, k3);
+/* o = y + sum_j a_j k_j over the listed stages (na of them, 1 to 9) in one
+ * pass over the components: each stage's vectors are read once, not once per
+ * group of four terms. */
+#define T1 (a0 * k0[i])
+#define T2 (T1 + a1 * k1[i])
+#define T3 (T2 + a2 * k2[i])
+#define T4 (T3 + a3 * k3[i])
+#define T5 (T4 + a4 * k4[i])
+#define T6 (T5 + a5 * k5[i])
+#define T7 (T6 + a6 * k6[i])
+#define T8 (T7 + a7 * k7[i])
+#define T9 (T8 + a8 * k8[i])
+STAGE_CLONES static void comb853(int n, double *restrict o, const double *restrict y, int na, const double *a,
+                                 const double *restrict k0, const double *restrict k1, const double *restrict k2,
+                                 const double *restrict k3, const double *restrict k4, const double *restrict k5,
+                                 const double *restrict k6, const double *restrict k7, const double *restrict k8) {
+    double c[9] = {0};
+    for (int j = 0; j < na && j < 9; j++) c[j] = a[j];
+    const double a0 = c[0], a1 = c[1], a2 = c[2], a3 = c[3], a4 = c[4], a5 = c[5], a6 = c[6], a7 = c[7], a8 = c[8];
+    switch (na) {
+    case 1: for (int i = 0; i < n; i++) o[i] = y[i] + T1; break;
+    case 2: for (int i = 0; i < n; i++) o[i] = y[i] + T2; break;
+    case 3: for (int i = 0; i < n; i++) o[i] = y[i] + T3; break;
+    case 4: for (int i = 0; i < n; i++) o[i] = y[i] + T4; break;
+    case 5: for (int i = 0; i < n; i++) o[i] = y[i] + T5; break;
+    case 6: for (int i = 0; i < n; i++) o[i] = y[i] + T6; break;
+    case 7: for (int i = 0; i < n; i++) o[i] = y[i] + T7; break;
+    case 8: for (int i = 0; i < n; i++) o[i] = y[i] + T8; break;
+    default: for (int i = 0; i < n; i++) o[i] = y[i] + T9; break;
     }
+}
+#undef T1
+#undef T2
+#undef T3
+#undef T4
+#undef T5
+#undef T6
+#undef T7
+#undef T8
+#undef T9
+
+static void combn(int n, double *o, const double *y, int na, const double *a, double *const *k) {
+    const double *kk[9];
+    for (int j = 0; j < 9; j++) kk[j] = k[j < na ? j : 0];  /* the unused ones: read by no term */
+    comb853(n, o, y, na, a, kk[0], kk[1], kk[2], kk[3], kk[4], kk[5], kk[6], kk[7], kk[8]);
 }
 
 /* the eight stages that carry b, e5 and e3 */
