@@ -394,26 +394,32 @@ int chain_simd_accept(Chain *c) {
     return changed;
 }
 
+static void sync_cart(ChainSimd *S, ChainScratch *sc, int i) {
+    CartScratch *cs = &sc->cart[i];
+    cs->s = S->s[i];
+    cs->v_t = S->vt[i];
+    double *d = sc->delta + N_SLOT * i, *dd = sc->ddelta + N_SLOT * i, *f = sc->force + N_SLOT * i;
+    for (int k = 0; k < 2; k++) {
+        d[k] = S->jd[k][i + 1];
+        dd[k] = S->jdd[k][i + 1];
+        f[k] = S->jfn[k][i + 1];
+    }
+    for (int k = 0; k < N_WHEEL; k++) {
+        cs->wheel_speed[k] = S->ws[k][i];
+        d[SLOT_WHEEL + k] = S->wd[k][i];
+        dd[SLOT_WHEEL + k] = S->wdd[k][i];
+        f[SLOT_WHEEL + k] = S->wf[k][i];
+    }
+}
+
 void chain_simd_sync(Chain *c) {
     ChainSimd *S = c->simd;
     if (!S || S->synced) return;
-    ChainScratch *sc = &c->sc;
-    for (int i = 0; i < S->N; i++) {
-        CartScratch *cs = &sc->cart[i];
-        cs->s = S->s[i];
-        cs->v_t = S->vt[i];
-        double *d = sc->delta + N_SLOT * i, *dd = sc->ddelta + N_SLOT * i, *f = sc->force + N_SLOT * i;
-        for (int k = 0; k < 2; k++) {
-            d[k] = S->jd[k][i + 1];
-            dd[k] = S->jdd[k][i + 1];
-            f[k] = S->jfn[k][i + 1];
-        }
-        for (int k = 0; k < N_WHEEL; k++) {
-            cs->wheel_speed[k] = S->ws[k][i];
-            d[SLOT_WHEEL + k] = S->wd[k][i];
-            dd[SLOT_WHEEL + k] = S->wdd[k][i];
-            f[SLOT_WHEEL + k] = S->wf[k][i];
-        }
-    }
+    for (int i = 0; i < S->N; i++) sync_cart(S, &c->sc, i);
     S->synced = 1;
+}
+
+void chain_simd_sync_cart(Chain *c, int i) {
+    ChainSimd *S = c->simd;
+    if (S && !S->synced) sync_cart(S, &c->sc, i);
 }

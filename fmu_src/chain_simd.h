@@ -122,6 +122,8 @@ int chain_simd_accept(Chain *c);
 /* Fills the scalar scratch from the last vector evaluation (no-op on the
  * scalar path or when done). */
 void chain_simd_sync(Chain *c);
+/* The same for cart i alone (the transducer's outputs). */
+void chain_simd_sync_cart(Chain *c, int i);
 
 /* Per-path entry points (chain_simd_avx2.c, chain_simd_avx512.c). */
 void chain_rhs_avx2(Chain *c, const double *y, double *dy);
