@@ -15,8 +15,8 @@
 
 /* The small loops over components (3, 9, 13 vectors) removed entirely: at
  * -O2 GCC kept many of them as loops over arrays of vectors on the stack,
- * so those values went through memory (k_joints held 129 of its 472
- * instructions' operands there after this, 256 of 576 before) and the
+ * so those values went through memory (in the AVX-512 k_joints, 256 of 576
+ * instructions had a stack operand; 129 of 472 with this) and the
  * right-hand side ran 1.2 to 1.3 times slower. Complete peeling changes no
  * arithmetic: the same bits. This file's scope only: the including file
  * pushes and pops the options. */
@@ -122,7 +122,8 @@ KI V vimpact(V vo, V ddelta, double v_min) { return vsel(vgt(vo, vzero()), vo, v
 /* Hunt-Crossley force of the lanes with delta > 0 (contact_force with
  * contact_vi), given 1 / v_i: fn, and the elastic part fe (both 0 where
  * open). The callers share one division among this and their other
- * reciprocals: the divider, not the multipliers, bounds these kernels. */
+ * reciprocals: divisions and square roots share one slow unit, and the arc
+ * kernel had 30 divisions and 13 roots per chunk (now 14 and 13). */
 KI void vcontact(const ContactLaw *law, V delta, V ddelta, V ivi, V *fn, V *fe) {
     M on = vgt(delta, vzero());
     V d = vmax(delta, vzero());
@@ -165,7 +166,9 @@ typedef struct {
  * about its n (uz = 0: vertical curves). Straights (k = 0, u = 0) fit all
  * three. On the last two, four entries of E are 0 and one is 1 by
  * construction, and the products with them are left out: the same bits
- * but for the sign of a zero (13 to 21 fewer multiplications a wheel). */
+ * but for the sign of a zero. The arc kernel is bound by its
+ * multiplications (the two FMA pipes): 514 multiplying instructions a
+ * chunk in form 1, 420 in forms 2 and 3 (AVX-512, GCC 12). */
 KI int e_zero(const int ARC, const int j) {
     return ARC == 2 ? (j == 2 || j == 5 || j == 6 || j == 7) : ARC == 3 ? (j == 1 || j == 3 || j == 5 || j == 7) : 0;
 }
