@@ -224,7 +224,7 @@ static void motor_window(Chain *c, int i, double sp0) {
 void simd_refresh(Chain *c, const double *y) {
     ChainSimd *S = c->simd;
     const ChainModel *m = &c->m;
-    int N = S->N, changed = 0;
+    int N = S->N, moved0 = 0, recode = 0;
     for (int i = 0; S->base_dirty && i < N; i++) {
         double sh = c->st.s_hint[i];
         /* the base sits at the grid point of SIMD_BASE_MOVE nearest the axle
@@ -235,19 +235,23 @@ void simd_refresh(Chain *c, const double *y) {
         double g = floor(sh * (1.0 / SIMD_BASE_MOVE) + 0.5) * SIMD_BASE_MOVE;
         if (S->key[i] != g) {
             TrackBase b;
-            int el = c->sc.cart[i].el;
+            int el = c->sc.cart[i].el, kind = S->kind[i];
+            double uy = S->uy[i], uz = S->uz[i];
             track_base(&m->track, g, &el, &b);
             put_base(S, &b, i);
             S->key[i] = g;
-            changed = 1;
+            moved0 |= i == 0;
+            /* what the chunks' codes and the twisted list depend on */
+            recode |= kind != S->kind[i] || uy != S->uy[i] || uz != S->uz[i];
             double sp0 = sh - (m->g.x_axle - m->g.x_motor);
             if (m->track.n_motors > 0 && !(sp0 >= S->mlo[i] + 0.5 * SIMD_MWIN && sp0 <= S->mhi[i] - 0.5 * SIMD_MWIN))
                 motor_window(c, i, sp0);
         }
     }
     S->base_dirty = 0;
-    if (changed) {
+    if (moved0)
         for (int i = N; i < S->NP; i++) copy_base(S, 0, i);
+    if (recode) {
         int nt = 0;
         for (int i = 0; i < N; i++)
             if (S->kind[i] == TL_TWISTED) S->fix[nt++] = i;
