@@ -1,6 +1,8 @@
 /* The outputs: the transducer cart's signals (its force sensors with their
  * gain and offset errors, effects.c), the chain and drive
  * quantities, the energy bookkeeping and the solver statistics. */
+#include <stddef.h>
+
 #include "chain_simd.h"
 
 static double mechanical_energy(const Chain *c) {
@@ -33,15 +35,22 @@ static int cart_past(const Chain *c, double s) {
     return who;
 }
 
-void chain_outputs(Chain *c, LSSOutputs *o) {
-    const ChainModel *m = &c->m;
-    const ChainScratch *sc = &c->sc;
+static void at_state(Chain *c) {
     if (!c->scratch_at_state) {
         chain_rhs(c, c->st.ode.t, c->st.y, c->dy_scratch);
         c->scratch_at_state = 1;
     }
-    chain_simd_sync(c);
+}
+
+/* The outputs of constant cost: the transducer's signals (only its cart's
+ * part of the scratch is brought over from the vector path), the chain's
+ * and the drive's scalars, the energy integrals, the solver's counts. */
+void chain_outputs_light(Chain *c, LSSOutputs *o) {
+    const ChainModel *m = &c->m;
+    const ChainScratch *sc = &c->sc;
+    at_state(c);
     int tr = m->transducer;
+    chain_simd_sync_cart(c, tr);
     const double *f = sc->force + N_SLOT * tr + SLOT_WHEEL, *ws = sc->cart[tr].wheel_speed;
     o->transducer_joint_F_x = sc->jointF[0];
     o->transducer_joint_F_y = sc->jointF[1];
@@ -62,6 +71,32 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     o->drive_F_total = sc->F_total;
     o->drive_P_total = sc->P_total;
     o->drive_F_cmd = sc->F_cmd;
+    o->energy_E_items = c->st.E_items;
+    const double *gl = c->st.y + CART_NY * m->n_carts;
+    o->energy_W_motor = gl[G_WMOT];
+    o->energy_W_damping = gl[G_WDAMP];
+    o->energy_W_rolling = gl[G_WROLL];
+    o->solver_n_steps = (int)c->st.ode.n_steps;
+    o->solver_n_rejected = (int)c->st.ode.n_rejected;
+    o->solver_h_last = c->st.ode.h_last;
+    o->solver_n_rhs = (int)(c->st.ode.n_rhs > 2147483647L ? 2147483647L : c->st.ode.n_rhs);
+    o->chain_n_carts = m->n_carts;
+    o->track_length = m->track.length;
+    o->cart_mass = m->g.mass;
+    o->chain_pitch = m->g.pitch;
+    o->chain_preload = m->preload;
+    o->drive_n_motors = m->track.n_motors;
+    o->cart_r_drive = m->g.r_drive;
+    o->solver_vector_path_used = c->path;
+}
+
+/* The outputs that walk every cart (or motor): the motor groups, the largest
+ * joint force, the stations, the items' mass, the mechanical energy. */
+void chain_outputs_bulk(Chain *c, LSSOutputs *o) {
+    const ChainModel *m = &c->m;
+    const ChainScratch *sc = &c->sc;
+    at_state(c);
+    chain_simd_sync(c);
     double gF[DRIVE_GROUPS], gv[DRIVE_GROUPS], gP[DRIVE_GROUPS];
     drive_groups(c, gF, gv, gP);
     double *oF[DRIVE_GROUPS] = {&o->drive_group1_F_total, &o->drive_group2_F_total, &o->drive_group3_F_total,
@@ -89,22 +124,28 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     double items = 0.0;
     for (int i = 0; i < m->n_carts; i++) items += c->st.load[i];
     o->chain_items_mass = items;
-    o->energy_E_items = c->st.E_items;
-    const double *gl = c->st.y + CART_NY * m->n_carts;
     o->energy_E_mech = mechanical_energy(c);
-    o->energy_W_motor = gl[G_WMOT];
-    o->energy_W_damping = gl[G_WDAMP];
-    o->energy_W_rolling = gl[G_WROLL];
-    o->solver_n_steps = (int)c->st.ode.n_steps;
-    o->solver_n_rejected = (int)c->st.ode.n_rejected;
-    o->solver_h_last = c->st.ode.h_last;
-    o->solver_n_rhs = (int)(c->st.ode.n_rhs > 2147483647L ? 2147483647L : c->st.ode.n_rhs);
-    o->chain_n_carts = m->n_carts;
-    o->track_length = m->track.length;
-    o->cart_mass = m->g.mass;
-    o->chain_pitch = m->g.pitch;
-    o->chain_preload = m->preload;
-    o->drive_n_motors = m->track.n_motors;
-    o->cart_r_drive = m->g.r_drive;
-    o->solver_vector_path_used = c->path;
+}
+
+void chain_outputs(Chain *c, LSSOutputs *o) {
+    chain_outputs_light(c, o);
+    chain_outputs_bulk(c, o);
+}
+
+int chain_output_is_bulk(size_t offset) {
+    static const size_t bulk[] = {
+        offsetof(LSSOutputs, chain_joint_F_max), offsetof(LSSOutputs, chain_joint_F_max_cart),
+        offsetof(LSSOutputs, station_induction_cart), offsetof(LSSOutputs, station_chute_cart),
+        offsetof(LSSOutputs, chain_items_mass), offsetof(LSSOutputs, energy_E_mech),
+        offsetof(LSSOutputs, drive_group1_F_total), offsetof(LSSOutputs, drive_group1_v), offsetof(LSSOutputs, drive_group1_P),
+        offsetof(LSSOutputs, drive_group2_F_total), offsetof(LSSOutputs, drive_group2_v), offsetof(LSSOutputs, drive_group2_P),
+        offsetof(LSSOutputs, drive_group3_F_total), offsetof(LSSOutputs, drive_group3_v), offsetof(LSSOutputs, drive_group3_P),
+        offsetof(LSSOutputs, drive_group4_F_total), offsetof(LSSOutputs, drive_group4_v), offsetof(LSSOutputs, drive_group4_P),
+        offsetof(LSSOutputs, drive_group5_F_total), offsetof(LSSOutputs, drive_group5_v), offsetof(LSSOutputs, drive_group5_P),
+        offsetof(LSSOutputs, drive_group6_F_total), offsetof(LSSOutputs, drive_group6_v), offsetof(LSSOutputs, drive_group6_P),
+        offsetof(LSSOutputs, drive_group7_F_total), offsetof(LSSOutputs, drive_group7_v), offsetof(LSSOutputs, drive_group7_P),
+        offsetof(LSSOutputs, drive_group8_F_total), offsetof(LSSOutputs, drive_group8_v), offsetof(LSSOutputs, drive_group8_P)};
+    for (size_t k = 0; k < sizeof bulk / sizeof bulk[0]; k++)
+        if (offset == bulk[k]) return 1;
+    return 0;
 }

@@ -66,6 +66,8 @@ int chain_simd_init(Chain *c, int requested) {
     S->N = N;
     S->NW = NW;
     S->NP = NP;
+    S->ir_drive = 1.0 / c->m.g.r_drive;
+    S->ir_steer = 1.0 / c->m.g.r_steer;
     uintptr_t a = ((uintptr_t)(S + 1) + 63) & ~(uintptr_t)63;
     double *p = (double *)a;
     for (int k = 0; k < CART_NY; k++) S->Y[k] = take(&p, NP);
@@ -118,6 +120,7 @@ int chain_simd_init(Chain *c, int requested) {
         }
     }
     S->vo_dirty = 1;
+    S->base_dirty = 1;
     S->synced = 0;
     return 0;
 }
@@ -144,6 +147,7 @@ void chain_simd_masses(Chain *c) {
 void chain_simd_invalidate(Chain *c) {
     if (c->simd) {
         c->simd->vo_dirty = 1;
+        c->simd->base_dirty = 1;
         c->simd->synced = 0;
     }
 }
@@ -213,12 +217,15 @@ static void motor_window(Chain *c, int i, double sp0) {
 /* Before every evaluation: the bases of the carts whose axle reached another
  * point of the SIMD_BASE_MOVE grid (one track_frame each; the scalar path
  * builds one per cart and accepted step, at the axle), the chunk kinds and
- * the twisted carts, the contact memory by quantity. */
+ * the twisted carts, the contact memory by quantity. The bases depend on
+ * s_hint alone, which changes only outside evaluations (then
+ * chain_simd_invalidate is called): they are checked once per change, not
+ * in each of a step's six or twelve evaluations. */
 void simd_refresh(Chain *c, const double *y) {
     ChainSimd *S = c->simd;
     const ChainModel *m = &c->m;
-    int N = S->N, changed = 0;
-    for (int i = 0; i < N; i++) {
+    int N = S->N, moved0 = 0, recode = 0;
+    for (int i = 0; S->base_dirty && i < N; i++) {
         double sh = c->st.s_hint[i];
         /* the base sits at the grid point of SIMD_BASE_MOVE nearest the axle
          * (a function of the state alone, so that a restored state replays
@@ -228,26 +235,39 @@ void simd_refresh(Chain *c, const double *y) {
         double g = floor(sh * (1.0 / SIMD_BASE_MOVE) + 0.5) * SIMD_BASE_MOVE;
         if (S->key[i] != g) {
             TrackBase b;
-            int el = c->sc.cart[i].el;
+            int el = c->sc.cart[i].el, kind = S->kind[i];
+            double uy = S->uy[i], uz = S->uz[i];
             track_base(&m->track, g, &el, &b);
             put_base(S, &b, i);
             S->key[i] = g;
-            changed = 1;
+            moved0 |= i == 0;
+            /* what the chunks' codes and the twisted list depend on */
+            recode |= kind != S->kind[i] || uy != S->uy[i] || uz != S->uz[i];
             double sp0 = sh - (m->g.x_axle - m->g.x_motor);
             if (m->track.n_motors > 0 && !(sp0 >= S->mlo[i] + 0.5 * SIMD_MWIN && sp0 <= S->mhi[i] - 0.5 * SIMD_MWIN))
                 motor_window(c, i, sp0);
         }
     }
-    if (changed) {
+    S->base_dirty = 0;
+    if (moved0)
         for (int i = N; i < S->NP; i++) copy_base(S, 0, i);
+    if (recode) {
         int nt = 0;
         for (int i = 0; i < N; i++)
             if (S->kind[i] == TL_TWISTED) S->fix[nt++] = i;
         S->n_fix_twisted = nt;
+        /* the code each chunk takes (chain_simd_kernel.h, ARC): 0 straight; 1 any
+         * plane arc; 2 arcs about b alone (uy = 0); 3 about n alone (uz = 0).
+         * Carts on twisted elements count for none: the scalar code redoes them. */
         for (int a = 0; a < S->NW; a += S->W) {
-            int arc = 0;
-            for (int l = a; l < a + S->W && l < N; l++) arc |= S->kind[l] != TL_STRAIGHT;
-            S->chunk[a / S->W] = (unsigned char)arc;
+            int arc = 0, off_b = 0, off_n = 0;
+            for (int l = a; l < a + S->W && l < N; l++) {
+                if (S->kind[l] != TL_PLANAR) continue;
+                arc = 1;
+                off_b |= S->uy[l] != 0.0;
+                off_n |= S->uz[l] != 0.0;
+            }
+            S->chunk[a / S->W] = (unsigned char)(!arc ? 0 : !off_b ? 2 : !off_n ? 3 : 1);
         }
     }
     if (S->vo_dirty) {
@@ -338,11 +358,7 @@ void simd_finish(Chain *c, const double *y, double *dy, double F_cmd, double zdo
     ChainScratch *sc = &c->sc;
     int N = S->N, tr = m->transducer;
     (void)y;
-    double pd = 0.0, pr = 0.0;
-    for (int i = 0; i < N; i++) {
-        pd += S->pdw[i] + S->pdj[i + 1];
-        pr += S->prw[i];
-    }
+    double pd = S->p_damp, pr = S->p_roll;  /* summed by the last kernel */
     double f[3] = {S->jf[0][tr + 1], S->jf[1][tr + 1], S->jf[2][tr + 1]}, RA[9];
     for (int k = 0; k < 9; k++) RA[k] = S->R[k][tr];
     m3_tmulv(sc->jointF, RA, f);
@@ -360,26 +376,54 @@ void simd_finish(Chain *c, const double *y, double *dy, double F_cmd, double zdo
     S->synced = 0;
 }
 
+int chain_simd_accept(Chain *c) {
+    ChainSimd *S = c->simd;
+    ChainState *st = &c->st;
+    const double v_min = c->m.v_min;
+    int changed = 0;
+    for (int i = 0; i < S->N; i++) {
+        int k0 = N_SLOT * i;
+        st->s_hint[i] = S->s[i];
+        for (int k = 0; k < 2; k++) {
+            changed |= contact_memory_slot(st, v_min, k0 + k, S->jd[k][i + 1], S->jdd[k][i + 1]);
+            S->voJ[k][i] = st->v_onset[k0 + k];
+        }
+        for (int k = 0; k < N_WHEEL; k++) {
+            int slot = k0 + SLOT_WHEEL + k;
+            changed |= contact_memory_slot(st, v_min, slot, S->wd[k][i], S->wdd[k][i]);
+            S->voW[k][i] = st->v_onset[slot];
+        }
+    }
+    S->base_dirty = 1;  /* s_hint moved; the mirror of v_onset is current */
+    return changed;
+}
+
+static void sync_cart(ChainSimd *S, ChainScratch *sc, int i) {
+    CartScratch *cs = &sc->cart[i];
+    cs->s = S->s[i];
+    cs->v_t = S->vt[i];
+    double *d = sc->delta + N_SLOT * i, *dd = sc->ddelta + N_SLOT * i, *f = sc->force + N_SLOT * i;
+    for (int k = 0; k < 2; k++) {
+        d[k] = S->jd[k][i + 1];
+        dd[k] = S->jdd[k][i + 1];
+        f[k] = S->jfn[k][i + 1];
+    }
+    for (int k = 0; k < N_WHEEL; k++) {
+        cs->wheel_speed[k] = S->ws[k][i];
+        d[SLOT_WHEEL + k] = S->wd[k][i];
+        dd[SLOT_WHEEL + k] = S->wdd[k][i];
+        f[SLOT_WHEEL + k] = S->wf[k][i];
+    }
+}
+
 void chain_simd_sync(Chain *c) {
     ChainSimd *S = c->simd;
     if (!S || S->synced) return;
-    ChainScratch *sc = &c->sc;
-    for (int i = 0; i < S->N; i++) {
-        CartScratch *cs = &sc->cart[i];
-        cs->s = S->s[i];
-        cs->v_t = S->vt[i];
-        double *d = sc->delta + N_SLOT * i, *dd = sc->ddelta + N_SLOT * i, *f = sc->force + N_SLOT * i;
-        for (int k = 0; k < 2; k++) {
-            d[k] = S->jd[k][i + 1];
-            dd[k] = S->jdd[k][i + 1];
-            f[k] = S->jfn[k][i + 1];
-        }
-        for (int k = 0; k < N_WHEEL; k++) {
-            cs->wheel_speed[k] = S->ws[k][i];
-            d[SLOT_WHEEL + k] = S->wd[k][i];
-            dd[SLOT_WHEEL + k] = S->wdd[k][i];
-            f[SLOT_WHEEL + k] = S->wf[k][i];
-        }
-    }
+    for (int i = 0; i < S->N; i++) sync_cart(S, &c->sc, i);
     S->synced = 1;
+}
+
+void chain_simd_sync_cart(Chain *c, int i) {
+    ChainSimd *S = c->simd;
+    if (S && !S->synced) sync_cart(S, &c->sc, i);
 }

@@ -77,6 +77,7 @@ typedef struct ChainSimd {
     double *ws[N_WHEEL];              /* wheel speeds */
     double *wd[N_WHEEL], *wdd[N_WHEEL], *wf[N_WHEEL];  /* indentation, rate, force */
     double *pdw, *prw;                /* damping and rolling power per cart */
+    double p_damp, p_roll;            /* their sums over the carts (with the joints' damping) */
     /* joints: joint j (cart j's front, cart j+1's rear) at index j + 1; index 0 is joint N-1 */
     double *jf[3], *jTA[3], *jTB[3];  /* force on cart j, torque on cart j, torque on cart j+1 */
     double *jd[2], *jdd[2], *jfn[2];  /* axial, radial: indentation, rate, force */
@@ -89,10 +90,12 @@ typedef struct ChainSimd {
     double *mlo, *mhi, *ms0[SIMD_NMOT], *ms1[SIMD_NMOT], *mil[SIMD_NMOT];
     unsigned char *mfull;             /* [NP] more motors than SIMD_NMOT: the scalar walk */
     unsigned char *kind;              /* [NP] TL_* of each base */
-    unsigned char *chunk;             /* [NW / W] 0: all straight; 1: arc code */
+    unsigned char *chunk;             /* [NW / W] 0: straight code; 1, 2, 3: arc code (any, about b, about n) */
     int *fix;                         /* [N] carts for the scalar code */
     int n_fix_twisted;                /* fix[0 .. n_fix_twisted) sit on twisted elements */
     int vo_dirty;                     /* v_onset changed since the mirror was taken */
+    int base_dirty;                   /* s_hint may have changed since the bases were checked */
+    double ir_drive, ir_steer;        /* 1 / wheel radius (no division per chunk) */
     int synced;                       /* the scalar scratch holds the last evaluation */
 } ChainSimd;
 
@@ -110,9 +113,17 @@ void chain_simd_free(Chain *c);
 void chain_simd_invalidate(Chain *c);
 /* The per-cart masses and moments of the vector path from the model's (they change with the items). */
 void chain_simd_masses(Chain *c);
+/* After an accepted step, from the last evaluation (at the new point): the
+ * track hints and the contact memory (ChainState) straight from the vector
+ * arrays, the mirror of the memory kept with it; the scalar scratch is
+ * filled only when asked (chain_simd_sync). Returns 1 if the right-hand
+ * side at the new point changed (update_contact_memory's rule). */
+int chain_simd_accept(Chain *c);
 /* Fills the scalar scratch from the last vector evaluation (no-op on the
  * scalar path or when done). */
 void chain_simd_sync(Chain *c);
+/* The same for cart i alone (the transducer's outputs). */
+void chain_simd_sync_cart(Chain *c, int i);
 
 /* Per-path entry points (chain_simd_avx2.c, chain_simd_avx512.c). */
 void chain_rhs_avx2(Chain *c, const double *y, double *dy);

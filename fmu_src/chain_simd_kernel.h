@@ -8,8 +8,19 @@
 #endif
 
 #include <immintrin.h>
+#include <stdint.h>
+#include <string.h>
 
 #define KI static inline __attribute__((always_inline))
+
+/* The small loops over components (3, 9, 13 vectors) removed entirely: at
+ * -O2 GCC kept many of them as loops over arrays of vectors on the stack,
+ * so those values went through memory (in the AVX-512 k_joints, 256 of 576
+ * instructions had a stack operand; 129 of 472 with this) and the
+ * right-hand side ran 1.2 to 1.3 times slower. Complete peeling changes no
+ * arithmetic: the same bits. This file's scope only: the including file
+ * pushes and pops the options. */
+#pragma GCC optimize("peel-loops")
 
 #if VW == 8 && defined(__SANITIZE_ADDRESS__)
 /* No stack protector in the AVX-512 kernels of AddressSanitizer builds (its
@@ -104,14 +115,20 @@ KI V vpow(V d, double n) {
     return t.v;
 }
 
+/* The impact velocity v_i of contact_vi: the onset velocity where one is
+ * remembered, else the closing rate floored at v_min (> 0 either way). */
+KI V vimpact(V vo, V ddelta, double v_min) { return vsel(vgt(vo, vzero()), vo, vmax(ddelta, vset(v_min))); }
+
 /* Hunt-Crossley force of the lanes with delta > 0 (contact_force with
- * contact_vi): fn, and the elastic part fe (both 0 where open). */
-KI void vcontact(const ContactLaw *law, V delta, V ddelta, V vo, double v_min, V *fn, V *fe) {
+ * contact_vi), given 1 / v_i: fn, and the elastic part fe (both 0 where
+ * open). The callers share one division among this and their other
+ * reciprocals: divisions and square roots share one slow unit, and the arc
+ * kernel had 30 divisions and 13 roots per chunk (now 14 and 13). */
+KI void vcontact(const ContactLaw *law, V delta, V ddelta, V ivi, V *fn, V *fe) {
     M on = vgt(delta, vzero());
     V d = vmax(delta, vzero());
     V e = vset(law->K) * vpow(d, law->n);
-    V vi = vsel(vgt(vo, vzero()), vo, vmax(ddelta, vset(v_min)));
-    V f = e * vfma(vset(law->chi), ddelta / vi, vset(1.0));
+    V f = e * vfma(vset(law->chi), ddelta * ivi, vset(1.0));
     *fn = vand(on, vmax(f, vzero()));
     *fe = vand(on, e);
 }
@@ -144,40 +161,73 @@ typedef struct {
     V d1, d2, ds;
 } VFrame;
 
+/* The arc code in three forms (ARC below): 1 any plane arc; 2 the chunk's
+ * arcs turn about the base's b (uy = 0: curves in the track's plane); 3
+ * about its n (uz = 0: vertical curves). Straights (k = 0, u = 0) fit all
+ * three. On the last two, four entries of E are 0 and one is 1 by
+ * construction, and the products with them are left out: the same bits
+ * but for the sign of a zero. The arc kernel is bound by its
+ * multiplications (the two FMA pipes): 514 multiplying instructions a
+ * chunk in form 1, 420 in forms 2 and 3 (AVX-512, GCC 12). */
+KI int e_zero(const int ARC, const int j) {
+    return ARC == 2 ? (j == 2 || j == 5 || j == 6 || j == 7) : ARC == 3 ? (j == 1 || j == 3 || j == 5 || j == 7) : 0;
+}
+KI int e_one(const int ARC, const int j) { return ARC == 2 ? j == 8 : ARC == 3 ? j == 4 : 0; }
+/* E_j x, and acc + E_j x (as vfma(E_j, x, acc)) */
+KI V emul(const int ARC, const VFrame *f, const int j, V x) {
+    return e_zero(ARC, j) ? vzero() : e_one(ARC, j) ? x : (V)(f->E[j] * x);
+}
+KI V emad(const int ARC, const VFrame *f, const int j, V x, V acc) {
+    return e_zero(ARC, j) ? acc : e_one(ARC, j) ? (V)(acc + x) : vfma(f->E[j], x, acc);
+}
+/* column c of E dotted with (v0, v1, v2), in dot3's order */
+KI V ecol(const int ARC, const VFrame *f, const int c, V v0, V v1, V v2) {
+    return emad(ARC, f, c, v0, emad(ARC, f, 3 + c, v1, emul(ARC, f, 6 + c, v2)));
+}
+
 /* tl_project_planar in terms of the curvature k (k = 0: a straight, where
  * it gives E = I and d = q + ds chat, the straight's result): from the
  * guess, one round of the fixed point ds = atan(k x / (1 - k q.m)) / k, then
  * the frame at that ds. ok loses the lanes that would need atan2 (|z| >=
  * 0.1) or leave the element (the scalar code takes those). With exact
  * (the axle) ds is recomputed from the final (x, rho) by the longer series. */
-KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int exact, VFrame *f, M *ok) {
+KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int exact, const int ARC, VFrame *f,
+                 M *ok) {
     V k = vld(S->k + i), uy = vld(S->uy + i), uz = vld(S->uz + i), cm = vld(S->cm + i);
     V c0 = vld(S->ch[0] + i), c1 = vld(S->ch[1] + i), c2 = vld(S->ch[2] + i);
     V one = vset(1.0);
-    V qm = vfms(q2, uy, q1 * uz);
+    V qm = ARC == 2 ? (V)(q1 * uz) : ARC == 3 ? (V)(-(q2 * uy)) : vfms(q2, uy, q1 * uz);
     V x = vfma(ds, c0, q0);
     V rk = vfms(k, vfma(ds, cm, qm), one);
     M good = vgt(rk, vzero());
-    V z = k * x / rk, z2 = z * z;
+    V xr = x * (one / rk);
+    V z = k * xr, z2 = z * z;
     good = mand(good, vlt(z2, vset(1e-2)));
     V T = vfms(z2, vfms(z2, vfms(z2, vfms(z2, vset(1.0 / 9), vset(1.0 / 7)), vset(1.0 / 5)), vset(1.0 / 3)), one);
-    ds = x / rk * T;
+    ds = xr * T;
     x = vfma(ds, c0, q0);
     rk = vfms(k, vfma(ds, cm, qm), one);
     V kx = k * x;
-    V rr = one / vsqrt(vfma(kx, kx, rk * rk));
+    /* rr = 1 / sq, ic = 1 / (1 + C) = sq / (sq + rk) and (exact) 1 / rk from
+     * one division: 1 / (sq (sq + rk) [rk]); all near 1 where the lane is good */
+    V sq = vsqrt(vfma(kx, kx, rk * rk)), sp = sq + rk, P = sq * sp;
+    V inv = one / (exact ? (V)(P * rk) : P);
+    V rr = exact ? (V)(sp * rk * inv) : (V)(sp * inv);
     V Sn = kx * rr, C = rk * rr, Sik = x * rr;
-    V ic = one / (one + C);
+    V ic = exact ? (V)(sq * sq * rk * inv) : (V)(sq * sq * inv);
     V C1 = Sn * Sn * ic, C1ik = Sn * Sik * ic;
     V Suy = Sn * uy, Suz = Sn * uz, C1uy = C1 * uy, C1uz = C1 * uz, C1yz = C1uy * uz;
     f->E[0] = C;    f->E[1] = -Suz;               f->E[2] = Suy;
     f->E[3] = Suz;  f->E[4] = vfms(C1uz, uz, one); f->E[5] = C1yz;
     f->E[6] = -Suy; f->E[7] = C1yz;               f->E[8] = vfms(C1uy, uy, one);
-    V r0 = x - Sik, r1 = vfms(C1ik, uz, vfma(ds, c1, q1)), r2 = vfma(C1ik, uy, vfma(ds, c2, q2));
-    f->d1 = dot3(f->E[1], f->E[4], f->E[7], r0, r1, r2);
-    f->d2 = dot3(f->E[2], f->E[5], f->E[8], r0, r1, r2);
+    V r0 = x - Sik;
+    V r1 = ARC == 3 ? vfma(ds, c1, q1) : vfms(C1ik, uz, vfma(ds, c1, q1));
+    V r2 = ARC == 2 ? vfma(ds, c2, q2) : vfma(C1ik, uy, vfma(ds, c2, q2));
+    f->d1 = ecol(ARC, f, 1, r0, r1, r2);
+    f->d2 = ecol(ARC, f, 2, r0, r1, r2);
     if (exact) {
-        z = kx / rk;
+        V xr1 = x * (P * inv);
+        z = k * xr1;
         z2 = z * z;
         good = mand(good, vlt(z2, vset(1e-2)));
         V Tf = vset(1.0 / 15);
@@ -188,7 +238,7 @@ KI void proj_arc(const ChainSimd *S, int i, V q0, V q1, V q2, V ds, const int ex
         Tf = vfms(z2, Tf, vset(1.0 / 5));
         Tf = vfms(z2, Tf, vset(1.0 / 3));
         Tf = vfms(z2, Tf, one);
-        ds = x / rk * Tf;
+        ds = xr1 * Tf;
     }
     *ok = mand(*ok, mand(good, mand(vge(ds, vld(S->lo + i)), vlt(ds, vld(S->hi + i)))));
     f->ds = ds;
@@ -260,9 +310,9 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     VFrame f;
     V vf0, vfn;  /* velocity along t, and along the normal (b for a driving wheel, n for a guide) */
     if (ARC) {
-        proj_arc(S, i, q[0], q[1], q[2], ds_axle, 0, &f, ok);
-        vf0 = dot3(f.E[0], f.E[3], f.E[6], v[0], v[1], v[2]);
-        vfn = drive ? dot3(f.E[2], f.E[5], f.E[8], v[0], v[1], v[2]) : dot3(f.E[1], f.E[4], f.E[7], v[0], v[1], v[2]);
+        proj_arc(S, i, q[0], q[1], q[2], ds_axle, 0, ARC, &f, ok);
+        vf0 = ecol(ARC, &f, 0, v[0], v[1], v[2]);
+        vfn = ecol(ARC, &f, drive ? 2 : 1, v[0], v[1], v[2]);
     } else {
         proj_straight(S, i, q[0], q[1], q[2], &f, ok);
         vf0 = v[0];
@@ -273,12 +323,12 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     if (drive) {
         delta = vset(r) - f.d2;
         ddelta = -vfn;
-    } else {
-        delta = vfma(vset(side), f.d1 - vset(h), vset(r));
-        ddelta = vset(side) * vfn;
+    } else {  /* side is +-1: signs flipped, not multiplied (the same bits) */
+        delta = side > 0 ? (V)(vset(r) + (f.d1 - vset(h))) : (V)(vset(r) - (f.d1 - vset(h)));
+        ddelta = side > 0 ? vfn : (V)(-vfn);
     }
     V vt = vf0;
-    vst(S->ws[k] + i, vt * vset(1.0 / r));
+    vst(S->ws[k] + i, vt * vset(drive ? S->ir_drive : S->ir_steer));
     V slope = vzero();
     if (drive && SURF) {
         Lanes a_ds = {.v = f.ds}, a_d1 = {.v = f.d1}, a_d2 = {.v = f.d2}, a_vt = {.v = vt}, a_dh, a_sl;
@@ -287,32 +337,41 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
         delta = delta + a_dh.v;
         ddelta = vfma(slope, vt, ddelta);
     }
+    /* 1 / v_i and 1 / sqrt(vt^2 + 1e-4) from one division */
+    V vi = vimpact(vld(S->voW[k] + i), ddelta, m->v_min), sd = vsqrt(vfma(vt, vt, vset(1e-4)));
+    V inv = vset(1.0) / (vi * sd);
     V fn, fe;
-    vcontact(&m->law[drive ? CC_RW : CC_SW], delta, ddelta, vld(S->voW[k] + i), m->v_min, &fn, &fe);
+    vcontact(&m->law[drive ? CC_RW : CC_SW], delta, ddelta, sd * inv, &fn, &fe);
     acc->pd = vfma(fn - fe, ddelta, acc->pd);
-    V sg = vt / vsqrt(vfma(vt, vt, vset(1e-4))), froll = vset(m->mu_roll) * fn;
+    V sg = vt * (vi * inv), froll = vset(m->mu_roll) * fn;
     V fsg = froll * sg;
     acc->pr = vfma(fsg, vt, acc->pr);
     /* ff = dir fn - froll sg t; dir = b (driving) or -side n (guide); fv = E ff, db = E dir */
-    V fv[3], db[3];
-    V fx = -fsg, fd = drive ? fn : (V)(vset(-side) * fn);
+    /* arm = rc - r db: a sign flip of db taken into the fused operation, and
+     * the straight code's zero components left out (the same bits) */
+    V fv[3], arm[3];
+    V fx = -fsg, fd = drive ? fn : (side > 0 ? (V)(-fn) : fn);
     if (ARC) {
         const int cd = drive ? 2 : 1;
         for (int j = 0; j < 3; j++) {
-            V e0 = f.E[3 * j], ed = f.E[3 * j + cd];
-            fv[j] = vfma(e0, fx, ed * fd);
-            db[j] = drive ? ed : (V)(vset(-side) * ed);
+            const int jd = 3 * j + cd;
+            V ed = f.E[jd];
+            fv[j] = emad(ARC, &f, 3 * j, fx, emul(ARC, &f, jd, fd));
+            if (e_zero(ARC, jd))
+                arm[j] = rc[j];
+            else if (e_one(ARC, jd))
+                arm[j] = (!drive && side > 0) ? (V)(rc[j] + vset(r)) : (V)(rc[j] - vset(r));
+            else
+                arm[j] = (!drive && side > 0) ? vfma(vset(r), ed, rc[j]) : vfms(vset(r), ed, rc[j]);
         }
     } else {
         fv[0] = fx;
         fv[1] = drive ? vzero() : fd;
         fv[2] = drive ? fd : vzero();
-        db[0] = vzero();
-        db[1] = drive ? vzero() : vset(-side);
-        db[2] = drive ? vset(1.0) : vzero();
+        arm[0] = rc[0];
+        arm[1] = drive ? rc[1] : (V)(rc[1] + vset(side * r));
+        arm[2] = drive ? (V)(rc[2] - vset(r)) : rc[2];
     }
-    V arm[3];
-    for (int j = 0; j < 3; j++) arm[j] = vfms(vset(r), db[j], rc[j]);
     for (int j = 0; j < 3; j++) acc->F[j] = acc->F[j] + fv[j];
     acc->T[0] = acc->T[0] + crx(arm[1], arm[2], fv[1], fv[2]);
     acc->T[1] = acc->T[1] + crx(arm[2], arm[0], fv[2], fv[0]);
@@ -320,7 +379,7 @@ KI void v_wheel(Chain *c, int i, const V *Mx, const V *Lq, const V *Lv, const V 
     if (drive && SURF) {
         /* the slope's tangential force through the wheel centre */
         V ft = -(fn * slope), tv[3];
-        for (int j = 0; j < 3; j++) tv[j] = ARC ? (V)(f.E[3 * j] * ft) : (j == 0 ? ft : vzero());
+        for (int j = 0; j < 3; j++) tv[j] = ARC ? emul(ARC, &f, 3 * j, ft) : (j == 0 ? ft : vzero());
         for (int j = 0; j < 3; j++) acc->F[j] = acc->F[j] + tv[j];
         acc->T[0] = acc->T[0] + crx(rc[1], rc[2], tv[1], tv[2]);
         acc->T[1] = acc->T[1] + crx(rc[2], rc[0], tv[2], tv[0]);
@@ -371,11 +430,10 @@ KI int k_chunk(Chain *c, int i, const int ARC, const int SURF) {
     va[2] = Lv[2] + crx(om[0], om[1], ra[0], ra[1]);
     M ok = vgt(vset(1.0), vzero());
     VFrame af;
-    V tl[3], vt;
+    V vt;
     if (ARC) {
-        proj_arc(S, i, qa[0], qa[1], qa[2], vzero(), 1, &af, &ok);
-        tl[0] = af.E[0]; tl[1] = af.E[3]; tl[2] = af.E[6];
-        vt = dot3(va[0], va[1], va[2], tl[0], tl[1], tl[2]);
+        proj_arc(S, i, qa[0], qa[1], qa[2], vzero(), 1, ARC, &af, &ok);
+        vt = ecol(ARC, &af, 0, va[0], va[1], va[2]);  /* va . tl, tl = E's column t */
     } else {
         proj_straight(S, i, qa[0], qa[1], qa[2], &af, &ok);
         vt = va[0];
@@ -386,7 +444,8 @@ KI int k_chunk(Chain *c, int i, const int ARC, const int SURF) {
     vst(S->vt + i, vt);
     V t[3];
     for (int j = 0; j < 3; j++) {
-        t[j] = ARC ? dot3(bR[3 * j], bR[3 * j + 1], bR[3 * j + 2], tl[0], tl[1], tl[2]) : bR[3 * j];
+        t[j] = ARC ? emad(ARC, &af, 0, bR[3 * j], emad(ARC, &af, 3, bR[3 * j + 1], emul(ARC, &af, 6, bR[3 * j + 2])))
+                   : bR[3 * j];  /* bR's row j . tl */
         vst(S->t[j] + i, t[j]);
     }
     VSum acc;
@@ -427,6 +486,8 @@ KI int k_chunk(Chain *c, int i, const int ARC, const int SURF) {
 
 static void k_wheels_straight(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 0, 0); }
 static void k_wheels_arc(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 1, 0); }
+static void k_wheels_arc_b(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 2, 0); }
+static void k_wheels_arc_n(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 3, 0); }
 static void k_wheels_straight_surf(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 0, 1); }
 static void k_wheels_arc_surf(Chain *c, int i, int *bad) { *bad = k_chunk(c, i, 1, 1); }
 
@@ -475,15 +536,21 @@ static void k_joints(Chain *c) {
         V sgn = vsel(vge(Da, zero), vset(1.0), vset(-1.0));
         /* axial */
         V da = vabs(Da) - gap, dda = sgn * Dadot, fa, fea;
-        vcontact(&m->law[CC_JA], da, dda, vld(S->voJ[0] + j), m->v_min, &fa, &fea);
-        V pd = (fa - fea) * dda;
+        V via = vimpact(vld(S->voJ[0] + j), dda, m->v_min);
         /* radial */
         M valid = vgt(rho, vset(1e-15));
-        V irho = vset(1.0) / vsel(valid, rho, vset(1.0)), u[3];
+        V rv = vsel(valid, rho, vset(1.0));
+        /* 1 / rho first (the radial closing rate needs it), then both 1 / v_i
+         * from one more division */
+        V irho = vset(1.0) / rv, u[3];
         for (int k = 0; k < 3; k++) u[k] = vand(valid, Dr[k] * irho);
         V ddr = vfms(Da, dot3(u[0], u[1], u[2], adot[0], adot[1], adot[2]), dot3(u[0], u[1], u[2], Dd[0], Dd[1], Dd[2]));
+        V vir = vimpact(vld(S->voJ[1] + j), ddr, m->v_min);
+        V inv = vset(1.0) / (via * vir);
+        vcontact(&m->law[CC_JA], da, dda, vir * inv, &fa, &fea);
+        V pd = (fa - fea) * dda;
         V dr = rho - gap, fr, fer;
-        vcontact(&m->law[CC_JR], vand(valid, dr), ddr, vld(S->voJ[1] + j), m->v_min, &fr, &fer);
+        vcontact(&m->law[CC_JR], vand(valid, dr), ddr, via * inv, &fr, &fer);
         pd = vfma(fr - fer, ddr, pd);
         /* force on A at pF, the opposite on B at pR */
         V f[3], sfa = sgn * fa;
@@ -543,8 +610,13 @@ static void k_gather(ChainSimd *S, const double *y) {
     }
     for (; i < N; i++)
         for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[CART_NY * i + k];
-    for (i = N; i < S->NP; i++)
-        for (int k = 0; k < CART_NY; k++) S->Y[k][i] = y[k];
+    /* quantity by quantity, [N, NP) by two overlapping vector stores (NP - N
+     * is from W to 2W) */
+    for (int k = 0; k < CART_NY; k++) {
+        V v = vset(y[k]);
+        vst(S->Y[k] + N, v);
+        vst(S->Y[k] + S->NP - VW, v);
+    }
 }
 
 /* columns d[13] of 4 carts (n of them real) into their rows of dy */
@@ -572,6 +644,33 @@ KI void scatter4(double *dy, const __m256d *d, int n) {
         for (int k = 0; k < CART_NY; k++) dy[CART_NY * l + k] = tmp[k].d[l];
 }
 
+#if VW == 8
+/* Half hf (carts 4 hf .. 4 hf + 3) of a full chunk of 8 into its rows of dy:
+ * scatter4 on the 256-bit halves, taken straight from the registers. */
+KI void scatter8_half(double *dy, const V *d, const int hf) {
+    double *r0 = dy + CART_NY * 4 * hf;
+    for (int c0 = 0; c0 < 12; c0 += 4) {
+        __m256d row[4];
+        if (hf)
+            tr4(_mm512_extractf64x4_pd(d[c0], 1), _mm512_extractf64x4_pd(d[c0 + 1], 1),
+                _mm512_extractf64x4_pd(d[c0 + 2], 1), _mm512_extractf64x4_pd(d[c0 + 3], 1), row);
+        else
+            tr4(_mm512_castpd512_pd256(d[c0]), _mm512_castpd512_pd256(d[c0 + 1]), _mm512_castpd512_pd256(d[c0 + 2]),
+                _mm512_castpd512_pd256(d[c0 + 3]), row);
+        _mm256_storeu_pd(r0 + c0, row[0]);
+        _mm256_storeu_pd(r0 + CART_NY + c0, row[1]);
+        _mm256_storeu_pd(r0 + 2 * CART_NY + c0, row[2]);
+        _mm256_storeu_pd(r0 + 3 * CART_NY + c0, row[3]);
+    }
+    __m256d q = hf ? _mm512_extractf64x4_pd(d[12], 1) : _mm512_castpd512_pd256(d[12]);
+    __m128d lo = _mm256_castpd256_pd128(q), hi = _mm256_extractf128_pd(q, 1);
+    _mm_storel_pd(r0 + 12, lo);
+    _mm_storeh_pd(r0 + CART_NY + 12, lo);
+    _mm_storel_pd(r0 + 2 * CART_NY + 12, hi);
+    _mm_storeh_pd(r0 + 3 * CART_NY + 12, hi);
+}
+#endif
+
 /* --- 6. forces summed, Newton-Euler (cart.c cart_derivatives), into dy ----- */
 /* The motors (drive.c drive_forces) with the candidates of chain_simd.c:
  * thrust F_cmd times the covered share of each candidate motor, along t at
@@ -588,7 +687,9 @@ KI void v_drive(Chain *c, int i, double F_cmd, const V *Rm, V *F, V *T, V *Ftot,
     V Fm = vset(F_cmd) * frac;
     M inw = mand(vge(sp, vld(S->mlo + i)), vge(vld(S->mhi + i), sp));
     int bad = ~mbits(inw) & MALL;
-    for (int l = 0; l < VW && l < S->N - i; l++)
+    uint64_t full = 0;  /* the chunk's flags at once (mfull has NP >= i + VW bytes) */
+    memcpy(&full, S->mfull + i, VW);
+    for (int l = 0; full && l < VW && l < S->N - i; l++)
         if (S->mfull[i + l]) bad |= 1 << l;
     bad &= (S->N - i >= VW) ? MALL : (1 << (S->N - i)) - 1;
     if (bad) {
@@ -621,8 +722,19 @@ KI void v_drive(Chain *c, int i, double F_cmd, const V *Rm, V *F, V *T, V *Ftot,
 
 static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
     ChainSimd *S = c->simd;
-    V Ftot = vzero(), Ptot = vzero();
+    V Ftot = vzero(), Ptot = vzero(), Pd = vzero(), Pr = vzero();
     for (int i = 0; i < S->NW; i += VW) {
+        {  /* the damping and rolling powers summed here, lane by lane (the padding left out) */
+            V pd = vld(S->pdw + i) + vld(S->pdj + i + 1), pr = vld(S->prw + i);
+            if (S->N - i < VW) {
+                Lanes a = {.v = pd}, b = {.v = pr};
+                for (int l = S->N - i; l < VW; l++) a.d[l] = b.d[l] = 0.0;
+                pd = a.v;
+                pr = b.v;
+            }
+            Pd = Pd + pd;
+            Pr = Pr + pr;
+        }
         V F[3], T[3], Rm[9];
         for (int k = 0; k < 3; k++) {
             F[k] = vld(S->Fw[k] + i) + vld(S->jf[k] + i + 1) - vld(S->jf[k] + i);
@@ -652,6 +764,11 @@ static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
 #if VW == 4
         scatter4(dy + CART_NY * i, d, n);
 #else
+        if (n == VW) {
+            scatter8_half(dy + CART_NY * i, d, 0);
+            scatter8_half(dy + CART_NY * i, d, 1);
+            continue;
+        }
         __m256d h[CART_NY];
         for (int k = 0; k < CART_NY; k++) h[k] = _mm512_castpd512_pd256(d[k]);
         scatter4(dy + CART_NY * i, h, n < 4 ? n : 4);
@@ -671,6 +788,14 @@ static void k_newton_euler(Chain *c, double *dy, double F_cmd, int vdrive) {
         c->sc.F_total = ft;
         c->sc.P_total = pt;
     }
+    Lanes a = {.v = Pd}, b = {.v = Pr};
+    double pd = 0.0, pr = 0.0;
+    for (int l = 0; l < VW; l++) {
+        pd += a.d[l];
+        pr += b.d[l];
+    }
+    S->p_damp = pd;
+    S->p_roll = pr;
 }
 
 static double vsum_range(const double *a, int n) {
@@ -693,8 +818,11 @@ void SIMD_ENTRY(Chain *c, const double *y, double *dy) {
     int nfix = S->n_fix_twisted, surf = m->fx.surface_on;
     for (int i = 0; i < S->NW; i += VW) {
         int bad;
-        if (S->chunk[i / VW]) {
+        int kind = S->chunk[i / VW];
+        if (kind) {
             if (surf) k_wheels_arc_surf(c, i, &bad);
+            else if (kind == 2) k_wheels_arc_b(c, i, &bad);
+            else if (kind == 3) k_wheels_arc_n(c, i, &bad);
             else k_wheels_arc(c, i, &bad);
         } else {
             if (surf) k_wheels_straight_surf(c, i, &bad);

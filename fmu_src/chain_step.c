@@ -7,32 +7,13 @@
 
 #include "chain_simd.h"
 
-/* A contact that closed within the step gets its onset velocity, interpolated
- * at the crossing; an open one forgets. Returns 1 if the right-hand side at
- * the new point changed: only when a contact closed and the remembered
- * onset velocity differs from the closing rate the evaluation used (an open
- * contact has no force whatever it remembers). */
+/* The contact memory of every slot from the scalar scratch (the scalar
+ * path; the vector paths work on their own arrays, chain_simd_accept).
+ * Returns 1 if the right-hand side at the new point changed. */
 static int update_contact_memory(Chain *c) {
-    ChainState *st = &c->st;
     const ChainScratch *sc = &c->sc;
     int changed = 0, n = N_SLOT * c->m.n_carts;
-    for (int k = 0; k < n; k++) {
-        double d1 = sc->delta[k], dd1 = sc->ddelta[k];
-        if (d1 > 0) {
-            if (!(st->v_onset[k] > 0)) {
-                double d0 = st->delta_prev[k], dd0 = st->ddelta_prev[k];
-                double th = (d0 < 0 && d1 > d0) ? d0 / (d0 - d1) : 1.0;
-                double v = (1 - th) * dd0 + th * dd1;
-                v = v > c->m.v_min ? v : c->m.v_min;
-                st->v_onset[k] = v;
-                if (v != contact_vi(0.0, dd1, c->m.v_min)) changed = 1;
-            }
-        } else if (st->v_onset[k] > 0) {
-            st->v_onset[k] = 0.0;
-        }
-        st->delta_prev[k] = d1;
-        st->ddelta_prev[k] = dd1;
-    }
+    for (int k = 0; k < n; k++) changed |= contact_memory_slot(&c->st, c->m.v_min, k, sc->delta[k], sc->ddelta[k]);
     return changed;
 }
 
@@ -90,7 +71,6 @@ static int accepted(void *ctx, double t, double *y) {
     Chain *c = ctx;
     int changed = 0;
     if (c->trace.on) record(c, c->st.ode.h_last, t);
-    chain_simd_sync(c);
     for (int i = 0; i < c->m.n_carts; i++) {
         double *q = y + CART_NY * i + 3;
         double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
@@ -98,12 +78,11 @@ static int accepted(void *ctx, double t, double *y) {
             for (int j = 0; j < 4; j++) q[j] /= nq;
             changed = 1;
         }
-        c->st.s_hint[i] = c->sc.cart[i].s;
     }
     /* the scratch holds the last stage, evaluated at the new point */
-    changed = update_contact_memory(c) || changed;
-    chain_simd_invalidate(c);
-    return changed;
+    if (c->simd) return chain_simd_accept(c) || changed;
+    for (int i = 0; i < c->m.n_carts; i++) c->st.s_hint[i] = c->sc.cart[i].s;
+    return update_contact_memory(c) || changed;
 }
 
 void chain_solver_init(Chain *c) {

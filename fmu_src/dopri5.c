@@ -85,23 +85,49 @@ STAGE_CLONES static void comb5(int n, double *restrict o, const double *restrict
     for (int i = 0; i < m; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i] + b4 * k4[i]);
     for (int i = m; i < n; i++) o[i] = y[i] + (b0 * k0[i] + b1 * k1[i] + b2 * k2[i] + b3 * k3[i] + b4 * k4[i]);
 }
-/* |sum g_j k_j| / (tol (scale + rel max(|y|, |y_new|))) per component */
-STAGE_CLONES static void err_ratio(int n, double *restrict o, const double *restrict y, const double *restrict yn,
+/* |sum g_j k_j| / (tol (scale + rel max(|y|, |y_new|))) per component into
+ * o, and their max (0 if n = 0) in the same pass (a max over eight lanes,
+ * which the compiler vectorises); a NaN anywhere makes the caller redo the
+ * max by max_norm below, whose order decides what a NaN gives. */
+STAGE_CLONES static double err_ratio(int n, double *restrict o, const double *restrict y, const double *restrict yn,
                       const double *restrict sc, const double *restrict rl, double tol, const double *g,
                       const double *restrict k0, const double *restrict k2, const double *restrict k3,
-                      const double *restrict k4, const double *restrict k5, const double *restrict k6) {
+                      const double *restrict k4, const double *restrict k5, const double *restrict k6,
+                      int *nan) {
     const double g1 = g[0], g3 = g[1], g4 = g[2], g5 = g[3], g6 = g[4], g7 = g[5];
-    int m = n & ~1;
-    for (int i = 0; i < m; i++) {
-        double e = g1 * k0[i] + g3 * k2[i] + g4 * k3[i] + g5 * k4[i] + g6 * k5[i] + g7 * k6[i];
-        double ay = fabs(y[i]), an = fabs(yn[i]);
-        o[i] = fabs(e) / (tol * (sc[i] + rl[i] * (ay > an ? ay : an)));
-    }
+    double mx[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    int bad = 0, m = n & ~7;
+    for (int i = 0; i < m; i += 8)
+        for (int l = 0; l < 8; l++) {
+            int j = i + l;
+            double e = g1 * k0[j] + g3 * k2[j] + g4 * k3[j] + g5 * k4[j] + g6 * k5[j] + g7 * k6[j];
+            double ay = fabs(y[j]), an = fabs(yn[j]);
+            double r = fabs(e) / (tol * (sc[j] + rl[j] * (ay > an ? ay : an)));
+            o[j] = r;
+            mx[l] = r > mx[l] ? r : mx[l];
+            bad |= r != r;
+        }
     for (int i = m; i < n; i++) {
         double e = g1 * k0[i] + g3 * k2[i] + g4 * k3[i] + g5 * k4[i] + g6 * k5[i] + g7 * k6[i];
         double ay = fabs(y[i]), an = fabs(yn[i]);
-        o[i] = fabs(e) / (tol * (sc[i] + rl[i] * (ay > an ? ay : an)));
+        double r = fabs(e) / (tol * (sc[i] + rl[i] * (ay > an ? ay : an)));
+        o[i] = r;
+        mx[0] = r > mx[0] ? r : mx[0];
+        bad |= r != r;
     }
+    *nan = bad;
+    double e = 0.0;
+    for (int l = 0; l < 8; l++) e = mx[l] > e ? mx[l] : e;
+    return e;
+}
+
+/* The max norm of the ratios, NaN as the solver has always read it: a
+ * component that is not <= the running max replaces it. */
+static double max_norm(int n, const double *o) {
+    double err = 0.0;
+    for (int i = 0; i < n; i++)
+        if (!(o[i] <= err)) err = o[i];
+    return err;
 }
 
 /* One trial step of size h from (t, y) with k[0] = f(t, y); returns the error
@@ -122,11 +148,9 @@ static double trial(Dopri *d, const double *y, double t, double h) {
     comb5(n, yn, y, h * a71, k[0], h * a73, k[2], h * a74, k[3], h * a75, k[4], h * a76, k[5]);
     d->rhs(d->ctx, t + h, yn, k[6]);
     const double g[6] = {h * e1, h * e3, h * e4, h * e5, h * e6, h * e7};
-    err_ratio(n, yt, y, yn, d->scale, d->rel, d->tol, g, k[0], k[2], k[3], k[4], k[5], k[6]);
-    double err = 0.0;
-    for (int i = 0; i < n; i++)
-        if (!(yt[i] <= err)) err = yt[i];  /* also propagates NaN */
-    return err;
+    int nan;
+    double err = err_ratio(n, yt, y, yn, d->scale, d->rel, d->tol, g, k[0], k[2], k[3], k[4], k[5], k[6], &nan);
+    return nan ? max_norm(n, yt) : err;
 }
 
 
@@ -164,28 +188,51 @@ static const double D8_B[8] = {0.054293734116568765, 4.450312892752409, 1.891517
 static const double D8_E5[8] = {0.01312004499419488, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294};
 static const double D8_E3[8] = {-0.18980075407240762, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082};
 
-/* o (+)= a0 k0 + a1 k1 + a2 k2 (+ a3 k3) in one pass; first: o = y + ... */
-STAGE_CLONES static void acc4(int n, double *restrict o, const double *restrict y, int first, int na,
-                              const double *a, const double *restrict k0, const double *restrict k1,
-                              const double *restrict k2, const double *restrict k3) {
-    double a0 = a[0], a1 = na > 1 ? a[1] : 0.0, a2 = na > 2 ? a[2] : 0.0, a3 = na > 3 ? a[3] : 0.0;
-    if (first && na == 4)
-        for (int i = 0; i < n; i++) o[i] = y[i] + (a0 * k0[i] + a1 * k1[i] + a2 * k2[i] + a3 * k3[i]);
-    else if (first)
-        for (int i = 0; i < n; i++) o[i] = y[i] + (a0 * k0[i] + a1 * k1[i] + a2 * k2[i]);
-    else if (na == 4)
-        for (int i = 0; i < n; i++) o[i] += a0 * k0[i] + a1 * k1[i] + a2 * k2[i] + a3 * k3[i];
-    else
-        for (int i = 0; i < n; i++) o[i] += a0 * k0[i] + a1 * k1[i] + a2 * k2[i];
-}
-
-/* o = y + sum_j a_j k_j over the listed stages (na of them), four per pass */
-static void combn(int n, double *o, const double *y, int na, const double *a, double *const *k) {
-    for (int j = 0; j < na; j += 4) {
-        int m = na - j < 4 ? na - j : 4;
-        const double *k1 = m > 1 ? k[j + 1] : k[j], *k2 = m > 2 ? k[j + 2] : k[j], *k3 = m > 3 ? k[j + 3] : k[j];
-        acc4(n, o, y, j == 0, m, a + j, k[j], k1, k2, k3);
+/* o = y + sum_j a_j k_j over the listed stages (na of them, 1 to 9) in one
+ * pass over the components: each stage's vectors are read once, not once per
+ * group of four terms. */
+#define T1 (a0 * k0[i])
+#define T2 (T1 + a1 * k1[i])
+#define T3 (T2 + a2 * k2[i])
+#define T4 (T3 + a3 * k3[i])
+#define T5 (T4 + a4 * k4[i])
+#define T6 (T5 + a5 * k5[i])
+#define T7 (T6 + a6 * k6[i])
+#define T8 (T7 + a7 * k7[i])
+#define T9 (T8 + a8 * k8[i])
+STAGE_CLONES static void comb853(int n, double *restrict o, const double *restrict y, int na, const double *a,
+                                 const double *restrict k0, const double *restrict k1, const double *restrict k2,
+                                 const double *restrict k3, const double *restrict k4, const double *restrict k5,
+                                 const double *restrict k6, const double *restrict k7, const double *restrict k8) {
+    double c[9] = {0};
+    for (int j = 0; j < na && j < 9; j++) c[j] = a[j];
+    const double a0 = c[0], a1 = c[1], a2 = c[2], a3 = c[3], a4 = c[4], a5 = c[5], a6 = c[6], a7 = c[7], a8 = c[8];
+    switch (na) {
+    case 1: for (int i = 0; i < n; i++) o[i] = y[i] + T1; break;
+    case 2: for (int i = 0; i < n; i++) o[i] = y[i] + T2; break;
+    case 3: for (int i = 0; i < n; i++) o[i] = y[i] + T3; break;
+    case 4: for (int i = 0; i < n; i++) o[i] = y[i] + T4; break;
+    case 5: for (int i = 0; i < n; i++) o[i] = y[i] + T5; break;
+    case 6: for (int i = 0; i < n; i++) o[i] = y[i] + T6; break;
+    case 7: for (int i = 0; i < n; i++) o[i] = y[i] + T7; break;
+    case 8: for (int i = 0; i < n; i++) o[i] = y[i] + T8; break;
+    default: for (int i = 0; i < n; i++) o[i] = y[i] + T9; break;
     }
+}
+#undef T1
+#undef T2
+#undef T3
+#undef T4
+#undef T5
+#undef T6
+#undef T7
+#undef T8
+#undef T9
+
+static void combn(int n, double *o, const double *y, int na, const double *a, double *const *k) {
+    const double *kk[9];
+    for (int j = 0; j < 9; j++) kk[j] = k[j < na ? j : 0];  /* the unused ones: read by no term */
+    comb853(n, o, y, na, a, kk[0], kk[1], kk[2], kk[3], kk[4], kk[5], kk[6], kk[7], kk[8]);
 }
 
 /* the eight stages that carry b, e5 and e3 */

@@ -138,17 +138,24 @@ static fmi2Status build_chain(Instance *in) {
     return fmi2OK;
 }
 
-fmi2Status lss_ensure_outputs(Instance *in) {
+fmi2Status lss_ensure_outputs_part(Instance *in, int bulk) {
     if (!in->chain || in->chain_stale) {
         if (build_chain(in) != fmi2OK) return fmi2Error;
     }
     if (in->outputs_stale) {
-        chain_outputs(in->chain, &in->out);
+        chain_outputs_light(in->chain, &in->out);
         sens_outputs(&in->sens, &in->p, &in->out);
         in->outputs_stale = 0;
+        in->bulk_done = 0;
+    }
+    if (bulk && !in->bulk_done) {  /* at the same state: any change sets outputs_stale */
+        chain_outputs_bulk(in->chain, &in->out);
+        in->bulk_done = 1;
     }
     return fmi2OK;
 }
+
+fmi2Status lss_ensure_outputs(Instance *in) { return lss_ensure_outputs_part(in, 1); }
 
 /* --- instance life cycle ------------------------------------------------------- */
 
@@ -343,11 +350,14 @@ static fmi2Status begin_get(Instance *in, const char *fn, const fmi2ValueReferen
         LOG_ERROR(in, "%s: NULL array with nvr = %zu", fn, nvr);
         return fmi2Error;
     }
-    int needs_outputs = 0;
+    int needs_outputs = 0, needs_bulk = 0;
     for (size_t i = 0; i < nvr; i++) {
         const LSSVarInfo *v = lookup(in, fn, vr[i], type);
         if (!v) return fmi2Error;
-        if (!v->in_params) needs_outputs = 1;
+        if (!v->in_params) {
+            needs_outputs = 1;
+            needs_bulk |= chain_output_is_bulk(v->offset);
+        }
     }
     if (needs_outputs) {
         if (!(in->state & ST_READ)) {
@@ -355,7 +365,7 @@ static fmi2Status begin_get(Instance *in, const char *fn, const fmi2ValueReferen
                       "not in state %s", fn, lss_state_name(in->state));
             return fmi2Error;
         }
-        return lss_ensure_outputs(in);
+        return lss_ensure_outputs_part(in, needs_bulk);
     }
     return fmi2OK;
 }

@@ -30,7 +30,8 @@ typedef struct {
     Chain *chain;
     Sens sens;              /* the followers of the forward sensitivities (sensitivity.n of them) */
     int chain_stale;        /* parameters changed since the chain was built */
-    int outputs_stale;
+    int outputs_stale;      /* the outputs are not those of the current state */
+    int bulk_done;          /* chain_outputs_bulk's part is (the outputs were brought up to date since) */
     double start_time, time;
     int setup_done;         /* fmi2SetupExperiment called since fmi2Instantiate or fmi2Reset */
     int tolerance_defined;
@@ -56,6 +57,10 @@ const char *lss_state_name(ModelState s);
 int lss_allowed(Instance *in, const char *fn, int mask);
 /* The outputs at the current state (builds the chain if needed). */
 fmi2Status lss_ensure_outputs(Instance *in);
+/* The same, the bulk part (chain_outputs_bulk) only if bulk is set: a master
+ * reading the transducer's channels at every point does not pay for a walk
+ * over every cart. */
+fmi2Status lss_ensure_outputs_part(Instance *in, int bulk);
 
 #define LOG_ERROR(in, ...) lss_log(in, fmi2Error, "logStatusError", __VA_ARGS__)
 

@@ -305,6 +305,7 @@ static fmi2Status restore(Instance *in, const Snapshot *s, const char *fn) {
         if (s->h.has_out) {
             in->out = s->h.out;
             in->outputs_stale = 0;
+            in->bulk_done = 1;  /* the snapshot's outputs are whole (lss_ensure_outputs) */
         }
     } else {
         in->chain_stale = 1;

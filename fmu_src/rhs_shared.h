@@ -15,6 +15,33 @@ static inline double contact_vi(double remembered, double ddelta, double v_min) 
     return ddelta > v_min ? ddelta : v_min;
 }
 
+/* The contact memory of slot k after an accepted step whose last stage
+ * (at the new point) gave indentation d1 and rate dd1: a contact that closed
+ * within the step gets its onset velocity, interpolated at the crossing; an
+ * open one forgets. Returns 1 if the right-hand side at the new point
+ * changed: only when a contact closed and the remembered onset velocity
+ * differs from the closing rate the evaluation used (an open contact has no
+ * force whatever it remembers). Shared by both paths (chain_step.c,
+ * chain_simd.c). */
+static inline int contact_memory_slot(ChainState *st, double v_min, int k, double d1, double dd1) {
+    int changed = 0;
+    if (d1 > 0) {
+        if (!(st->v_onset[k] > 0)) {
+            double d0 = st->delta_prev[k], dd0 = st->ddelta_prev[k];
+            double th = (d0 < 0 && d1 > d0) ? d0 / (d0 - d1) : 1.0;
+            double v = (1 - th) * dd0 + th * dd1;
+            v = v > v_min ? v : v_min;
+            st->v_onset[k] = v;
+            if (v != contact_vi(0.0, dd1, v_min)) changed = 1;
+        }
+    } else if (st->v_onset[k] > 0) {
+        st->v_onset[k] = 0.0;
+    }
+    st->delta_prev[k] = d1;
+    st->ddelta_prev[k] = dd1;
+    return changed;
+}
+
 /* Can a motor push at all (a motor exists, and a command, an external thrust or the ripple is on)? */
 static inline int drive_acts(const ChainModel *m, double F_cmd) {
     return m->track.n_motors > 0 && (F_cmd != 0.0 || m->fx.ripple_on || m->drive_mode == DRIVE_EXTERNAL);

@@ -147,7 +147,7 @@ void sens_outputs(Sens *s, const LSSParams *p, LSSOutputs *out) {
             double *slot = (double *)((char *)out + d->offset);
             *slot = 0.0;
             if (k >= s->n) continue;
-            if (j == 0) chain_outputs(s->f[k], &fo);
+            if (j == 0) chain_outputs_light(s->f[k], &fo);  /* the transducer's channels */
             size_t off = LSS_VARS[VR_TRANSDUCER_JOINT_F_X + j].offset;
             double yf = *(const double *)((const char *)&fo + off), y = *(const double *)((const char *)out + off);
             *slot = (yf - y) / step_of(p, k);
