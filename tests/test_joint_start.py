@@ -244,44 +244,6 @@ def test_holding_the_rest_relaxes_each_record_once_in_the_complex(two_records, m
     assert sum(relaxed) > 2 * len(q.parts)
 
 
-def test_windows_shorter_than_the_record_hold_the_rest_and_the_whole_record_frees_it(two_records, monkeypatch):
-    """hold_rest: after the first window, each window shorter than the record
-    holds the pretension and the trigger points where the window before left
-    them, so its Levenberg-Marquardt relaxes no chain anew; the whole record
-    frees them."""
-    from lss_fmu.runner import ChainSimulator
-    jp, _ = _joint(two_records)
-    w = 1.0 / np.asarray(jp.noise, float) ** 2
-    full = float(jp.times[-1] - jp.times[0])
-    calls, now = [], {"relaxed": 0}
-    keep = ChainSimulator._keep_rest
-
-    def counted(self, key):
-        now["relaxed"] += 1
-        return keep(self, key)
-    monkeypatch.setattr(ChainSimulator, "_keep_rest", counted)
-    real = growing.refine
-
-    def spy(problem, x, **kw):
-        before = now["relaxed"]
-        out = real(problem, x, **kw)
-        calls.append((float(problem.times[-1] - problem.times[0]), tuple(problem.free), now["relaxed"] - before))
-        return out
-    monkeypatch.setattr(growing, "refine", spy)
-    x, info = growing.grow(jp, evals=15, channel_weights=w, profile_points=1, hold_rest=True, growth=1.45)
-    rest = info["rest_held"]
-    assert rest and len(x) == len(jp.free)
-    dt = float(np.median(np.diff(jp.times)))
-    steps = growing.windows(full + dt, growing.FIRST, 1.45)
-    assert len(steps) >= 3   # a window between the first and the whole record
-    windows = [c for c in calls if c[0] > steps[0] + dt]   # the growing windows' Levenberg-Marquardt
-    assert len(windows) == len(steps) - 1 and windows[-1][0] == pytest.approx(full)
-    shorter, last = windows[:-1], windows[-1]
-    for _, free, relaxed in shorter:
-        assert not set(rest) & set(free) and relaxed == 0, (free, relaxed)
-    assert set(rest) <= set(last[1])   # the whole record frees them
-
-
 def test_the_rest_fit_finds_the_pretension_and_each_trigger_point_from_another_valley(two_records):
     """fit_rest from start values a valley or more away (each trigger point
     0.45 m off the truth on either side or at its bound, the pretension at

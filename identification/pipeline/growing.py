@@ -131,10 +131,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     trigger points) where rest_fit.fit_rest puts them on the first window,
     so each record relaxes once instead of once per evaluation;
     Levenberg-Marquardt then frees them on the first window
-    (`info["rest_held"]`, the values held in `info["rest_fit"]`), and each
-    later window shorter than the record holds them where the window before
-    left them: a window's Jacobian then needs no relaxation and a column
-    fewer per variable held; the whole record frees them again.
+    (`info["rest_held"]`, the values held in `info["rest_fit"]`).
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -196,20 +193,14 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     carried = None
     for t in steps[1:]:
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
-        # shorter than the record: what sets the chain at rest held where the window before left it
-        vals = dict(zip(problem.free, map(float, x)))
-        qw = without(q, rest, vals) if rest and t < duration else q
-        xw = np.array([vals[n] for n in qw.free])
-        r = refine(qw, xw, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP,
-                   steps=carried if CARRY_STEPS and carried is not None and len(carried) == len(xw) else None,
-                   broyden=BROYDEN)
+        r = refine(q, x, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP,
+                   steps=carried if CARRY_STEPS else None, broyden=BROYDEN)
         carried = getattr(r, "steps", None) if getattr(r, "steps", None) is not None else carried
         nfev += r.nfev
         # refine's f is S in the same metric at its point: no simulation more
-        xr, fr = (np.asarray(r.x, float), float(r.f)) if np.isfinite(r.f) else (xw, float("inf"))
+        xr, fr = (np.asarray(r.x, float), float(r.f)) if np.isfinite(r.f) else (x, float("inf"))
         off = records_off(q, r.sim, w) if getattr(r, "sim", None) is not None and np.isfinite(r.f) else []
-        vals.update(zip(qw.free, map(float, xr)))
-        x = np.array([vals[n] for n in problem.free])
+        x = xr
         trail.append({"window_s": t, "S_per_sample": fr / q.samples.size})
         if off:
             trail[-1]["records_off"] = [int(k) for k in off]
