@@ -19,12 +19,13 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import time
 
 import numpy as np
 
 from bench_common import COMM, machine
+from lss_fmu.atomic import write_json_atomic
+from lss_fmu.runner import ChainSimulator
 from lss_fmu.variables import FORCE_CHANNELS
 
 
@@ -47,7 +48,6 @@ def main(argv=None):
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     pb = {k: float(v) for k, v in (kv.split("=", 1) for kv in a.set_b)}
-    from lss_fmu.runner import ChainSimulator
     res = dict(machine=machine(), a=a.a, b=a.b, b_params=pb, time=a.time, pairs=a.pairs, layouts={})
     with ChainSimulator(a.a) as sa, ChainSimulator(a.b) as sb:
         for layout in a.layouts:
@@ -75,8 +75,7 @@ def main(argv=None):
                   f"{r['ratio_median']:.3f} (min {r['ratio_min']:.3f}, max {r['ratio_max']:.3f}); "
                   f"outputs differ by at most {diff:.3g} N (range {rng:.3g} N)", flush=True)
     if a.json:
-        with open(a.json, "w") as f:
-            json.dump(res, f, indent=1)
+        write_json_atomic(a.json, res, indent=1)
     return res
 
 
