@@ -97,15 +97,25 @@ def information_weights(r: np.ndarray) -> np.ndarray:
 
 
 def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[np.ndarray] = None,
-              rel_step: float = REL_STEP) -> list:
-    """One Interval per free variable of the problem at x (about 2 simulations per variable)."""
+              rel_step: float = REL_STEP, linearised: Optional[tuple] = None) -> list:
+    """One Interval per free variable of the problem at x (about 2 simulations
+    per variable). `linearised`: (point, steps) of a central Jacobian already
+    differenced with x inside its stencil (every variable within its step of
+    the point; see inside_stencil): the Jacobian is taken there, at those
+    steps, from the problem's kept simulations, and only a rough column's
+    second look at half its step is simulated."""
     x = np.asarray(x, float)
     sim0 = problem.simulate(x) if sim is None else np.asarray(sim, float)
     r = tared(problem.samples - sim0, problem.tare)
     sigma2 = np.maximum(np.mean(r ** 2, axis=0), 1e-30)
     # differenced, not the core's sensitivities: the roughness of each column (forward against backward)
     # is what tells a chaotic response from a smooth one here
-    J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2, recheck=ROUGH, exact=False)
+    if linearised is not None and inside_stencil(x, *linearised):
+        xa, ha = np.asarray(linearised[0], float), np.asarray(linearised[1], float)
+        J, steps, rough = jacobian(problem, xa, problem.simulate(xa), rel_step, 1.0 / sigma2, steps=ha,
+                                   recheck=ROUGH, exact=False)
+    else:
+        J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2, recheck=ROUGH, exact=False)
     if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
         demean = np.abs((problem.samples - sim0).mean(axis=0)) <= problem.tare
         J[:, demean, :] -= J[:, demean, :].mean(axis=0)
@@ -128,6 +138,16 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
         out.append(Interval(name, float(x[k]), float(sd[k]), float(a), float(b), ok, smooth=smooth,
                             at_noise=at_noise))
     return out
+
+
+def inside_stencil(x: Sequence[float], point: Sequence[float], steps: Sequence[float]) -> bool:
+    """Whether x lies inside the stencil of a central Jacobian differenced at
+    `point` with `steps`: every variable within its (non-zero) step of the
+    point. A central difference is the mean slope over [point - h, point + h],
+    so it is the Jacobian of any x in there to the accuracy it has."""
+    x, point, steps = (np.asarray(a, float) for a in (x, point, steps))
+    return bool(x.shape == point.shape == steps.shape and np.all(steps > 0)
+                and np.all(np.abs(x - point) <= steps))
 
 
 AT_NOISE_Z = 5.0     # standard deviations of chi^2 above its mean beyond which a fit is not at the noise

@@ -242,7 +242,7 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
                 return out
         except (ValueError, KeyError, TypeError):
             pass  # unreadable: computed again
-    out, sim = {}, None
+    out, sim, lin = {}, None, None
     if refine_evals > 0:
         ref = refine(problem, x, max_evals=int(refine_evals), rel_step=REFINE_STEP, f_rtol=1e-4, central=True)
         out["refined"] = {"f_start": float(f), "f": float(ref.f), "nfev": int(ref.nfev),
@@ -250,9 +250,11 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
         if ref.f < f:
             out["x"], out["f"], sim = ref.x.tolist(), float(ref.f), ref.sim
             x = ref.x
+        if ref.at is not None and ref.steps is not None:
+            lin = (ref.at, ref.steps)   # the intervals take it where x is inside its stencil
     if uncertainty:
         try:
-            out["intervals"] = intervals(problem, x, sim)
+            out["intervals"] = intervals(problem, x, sim, linearised=lin)
         except Exception as exc:  # no intervals rather than no result
             log.warning("%s: intervals failed: %s", problem.name, exc)
     if side is not None:

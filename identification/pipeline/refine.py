@@ -34,6 +34,8 @@ class Refined:
     iterations: int
     sim: Optional[np.ndarray] = None   # the simulation at x (None if the start point failed)
     steps: Optional[np.ndarray] = None  # central: the difference steps the Jacobians used
+    at: Optional[np.ndarray] = None     # central: where the last Jacobian was differenced (with `steps`; None
+                                        # when it was updated by Broyden's formula after that)
 
 
 def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> tuple:
@@ -79,6 +81,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     guess, steps = steps, None   # central: scaled to each variable's sensitivity at the start, kept after
     span = np.where(hi > lo, hi - lo, 1.0)
     raw, fresh = None, True   # the Jacobian's columns; whether they were differenced at x
+    at = None
     while nfev + (0 if not fresh else per_jacobian) + 1 <= max_evals:
         if fresh:
             if central:
@@ -87,6 +90,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 nfev += per_jacobian + (len(x) if steps is None else 0)
                 steps = used
                 raw = [J[:, :, k] for k in range(len(x)) if used[k] > 0]
+                at = x.copy()
             else:
                 raw = one_sided_jacobian(problem, x, sim, rel_step=rel_step)
                 nfev += per_jacobian
@@ -116,6 +120,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 gain = (f - f_n) / f
                 if broyden:
                     raw = _broyden(raw, (xn - x) / span, sim_n - sim, span)
+                    at = None
                 x, sim, r, demean, f = xn, sim_n, r_n, dm_n, f_n
                 lam = max(lam / 10.0, 1e-7)
                 better = gain >= f_rtol
@@ -129,7 +134,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 continue
             break
         fresh = not broyden
-    return Refined(x, f, f_start, nfev, it, sim, steps)
+    return Refined(x, f, f_start, nfev, it, sim, steps, at)
 
 
 def _broyden(raw: list, z: np.ndarray, dy: np.ndarray, span: np.ndarray) -> list:
