@@ -16,8 +16,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import identification.pipeline.growing as growing
 import identification.pipeline.windowing as windowing
 from identification.pipeline.identify_grown import identify_grown
+from identification.pipeline.refine import Refined
 from identification.objective.problem import drive_known, from_measurement
 from lss_fmu.rig import load_truth, true_design_values
 
@@ -84,6 +86,32 @@ def test_a_shorter_window_starts_from_the_grown_point_at_its_length(start_stop_l
     assert res.to_dict()["window_s"] == pytest.approx(1.0, abs=0.01)
     bar = capsys.readouterr().err   # the progress bar went through the stages, f shown after each
     assert "4/4" in bar and "edges: f = " in bar
+
+
+def test_the_windows_can_leave_the_whole_record_to_the_refinement(start_stop_layout1, monkeypatch):
+    """grow(whole=False) takes every window of growing.windows but the whole
+    record, which identify_grown's refinement (the same Levenberg-Marquardt
+    in the same metric) then takes; whole=True ends on the whole record."""
+    p = from_measurement(start_stop_layout1, "LW", window=WINDOW, tare=True, objective="likelihood")
+    seen = []
+
+    def fake_refine(q, x, **kw):   # the windows' Levenberg-Marquardt, recorded instead of run
+        seen.append(round(float(q.times[-1] - q.times[0]), 3))
+        return Refined(np.asarray(x, float), 1.0, 1.0, 1, 1)
+
+    monkeypatch.setattr(growing, "refine", fake_refine)
+    try:
+        duration = float(p.times[-1] - p.times[0]) + float(np.median(np.diff(p.times)))
+        steps = growing.windows(duration)
+        for whole in (True, False):
+            seen.clear()
+            _, info = growing.grow(p, start=p.x0_vector(), channel_weights=1.0 / p.noise ** 2, profile_points=0,
+                                   whole=whole)
+            taken = steps[1:] if whole else steps[1:-1]
+            assert len(seen) == 1 + len(taken)   # the first window's refinement from the start point, then each
+            assert [round(t["window_s"], 3) for t in info["windows"]] == [round(t, 3) for t in [steps[0], *taken]]
+    finally:
+        p.sim.close()
 
 
 def test_grown_refuses_what_it_cannot_do(start_stop_layout1):

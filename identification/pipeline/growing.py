@@ -95,7 +95,8 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
          journal: Optional[Path] = None, hold: Sequence[str] = (),
          channel_weights: Optional[np.ndarray] = None, keep_points: bool = False,
          reset_unseen: bool = False, start: Optional[Sequence[float]] = None,
-         retry: Optional[Callable[[], tuple]] = None, workers: int = 1, hold_rest: bool = False) -> tuple:
+         retry: Optional[Callable[[], tuple]] = None, workers: int = 1, hold_rest: bool = False,
+         whole: bool = True) -> tuple:
     """(x, info): the problem's optimum found on its first window (the complex
     with `evals` evaluations, then the profile of its least-determined
     variable over `profile_points` values) and followed by
@@ -132,6 +133,10 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     so each record relaxes once instead of once per evaluation;
     Levenberg-Marquardt then frees them on the first window
     (`info["rest_held"]`, the values held in `info["rest_fit"]`).
+    `whole`: False stops at the last window shorter than the record, for a
+    caller whose own Levenberg-Marquardt on the whole record, in the same
+    metric, follows (identify_grown's refinement): that window would be a
+    first, coarser pass of the same minimisation.
     """
     t0 = time.process_time()
     duration = float(problem.times[-1] - problem.times[0]) + float(np.median(np.diff(problem.times)))
@@ -191,7 +196,7 @@ def grow(problem: IdentificationProblem, *, evals: int = 400, noise_std: Optiona
     if keep_points:
         trail[0]["x"] = x.tolist()
     carried = None
-    for t in steps[1:]:
+    for t in (steps[1:] if whole else steps[1:-1]):
         q = truncated(problem, problem.times[0] + t) if t < duration else problem
         r = refine(q, x, max_evals=per_window, central=True, channel_weights=w, rel_step=STEP,
                    steps=carried if CARRY_STEPS else None, broyden=BROYDEN)

@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 STARTS = ("complex", "single", "auto")   # where a joint problem's first window starts (joint_start)
 STAGES = ("grown", "refined", "windows", "edges")   # what the progress bar counts, per run
 PROFILE_POINTS = 9   # the profile of the least-determined variable on the first window (growing.grow)
+WHOLE_TO_REFINEMENT = True   # the growing windows stop short of the whole record, which the refinement takes
 
 
 def identify_grown(problem, *, max_evals: int = 400, seed=0, journal: Optional[Path] = None,
@@ -215,9 +216,13 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
                                                  hold_rest=hold_rest)
             return box["x"], box["info"]["nfev"]
         retry = single_retry
+    # the refinement is Levenberg-Marquardt on the whole record in the windows' own metric when the
+    # objective is the declared noise's likelihood: the whole record is then left to it
+    same_metric = w is not None and getattr(problem, "objective", "pointwise") == "likelihood"
     x, info = grow(problem, evals=int(max_evals), first=first, seed=seed, journal=journal,
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
-                   start=x_start, retry=retry, workers=workers, hold_rest=hold_rest)
+                   start=x_start, retry=retry, workers=workers, hold_rest=hold_rest,
+                   whole=not (WHOLE_TO_REFINEMENT and same_metric and int(refine_evals) > 0))
     tick("grown", float(info["windows"][-1]["S_per_sample"]) * problem.samples.size)
     if started is not None:
         info["nfev"] += started["nfev"]
