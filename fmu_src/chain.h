@@ -51,11 +51,10 @@ int chain_step(Chain *c, double t_end, char *err, size_t errlen);
 void chain_outputs(Chain *c, LSSOutputs *out);
 /* chain_outputs in two parts: the light one of constant cost (the
  * transducer's signals, the chain's scalars, the solver's counts), the bulk
- * one the outputs that walk every cart or motor; chain_output_is_bulk tells
- * an output's part by its offset in LSSOutputs. */
+ * one the outputs that walk every cart or motor (LSSVarInfo.bulk, set in the
+ * variable table lss_fmu/variables.py). */
 void chain_outputs_light(Chain *c, LSSOutputs *out);
 void chain_outputs_bulk(Chain *c, LSSOutputs *out);
-int chain_output_is_bulk(size_t offset);
 
 /* Recording of the accepted steps (on: from now, an empty trace; off: stop)
  * and its memory. */

@@ -131,21 +131,3 @@ void chain_outputs(Chain *c, LSSOutputs *o) {
     chain_outputs_light(c, o);
     chain_outputs_bulk(c, o);
 }
-
-int chain_output_is_bulk(size_t offset) {
-    static const size_t bulk[] = {
-        offsetof(LSSOutputs, chain_joint_F_max), offsetof(LSSOutputs, chain_joint_F_max_cart),
-        offsetof(LSSOutputs, station_induction_cart), offsetof(LSSOutputs, station_chute_cart),
-        offsetof(LSSOutputs, chain_items_mass), offsetof(LSSOutputs, energy_E_mech),
-        offsetof(LSSOutputs, drive_group1_F_total), offsetof(LSSOutputs, drive_group1_v), offsetof(LSSOutputs, drive_group1_P),
-        offsetof(LSSOutputs, drive_group2_F_total), offsetof(LSSOutputs, drive_group2_v), offsetof(LSSOutputs, drive_group2_P),
-        offsetof(LSSOutputs, drive_group3_F_total), offsetof(LSSOutputs, drive_group3_v), offsetof(LSSOutputs, drive_group3_P),
-        offsetof(LSSOutputs, drive_group4_F_total), offsetof(LSSOutputs, drive_group4_v), offsetof(LSSOutputs, drive_group4_P),
-        offsetof(LSSOutputs, drive_group5_F_total), offsetof(LSSOutputs, drive_group5_v), offsetof(LSSOutputs, drive_group5_P),
-        offsetof(LSSOutputs, drive_group6_F_total), offsetof(LSSOutputs, drive_group6_v), offsetof(LSSOutputs, drive_group6_P),
-        offsetof(LSSOutputs, drive_group7_F_total), offsetof(LSSOutputs, drive_group7_v), offsetof(LSSOutputs, drive_group7_P),
-        offsetof(LSSOutputs, drive_group8_F_total), offsetof(LSSOutputs, drive_group8_v), offsetof(LSSOutputs, drive_group8_P)};
-    for (size_t k = 0; k < sizeof bulk / sizeof bulk[0]; k++)
-        if (offset == bulk[k]) return 1;
-    return 0;
-}

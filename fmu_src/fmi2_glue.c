@@ -356,7 +356,7 @@ static fmi2Status begin_get(Instance *in, const char *fn, const fmi2ValueReferen
         if (!v) return fmi2Error;
         if (!v->in_params) {
             needs_outputs = 1;
-            needs_bulk |= chain_output_is_bulk(v->offset);
+            needs_bulk |= v->bulk;
         }
     }
     if (needs_outputs) {

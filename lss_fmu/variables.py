@@ -29,6 +29,8 @@ class Var:
     start: Optional[Number] = None
     min: Optional[float] = None
     max: Optional[float] = None
+    bulk: bool = False        # an output filled by a walk over every cart or motor group: the FMU fills
+                              # it only when it (or a state) is asked for, not at every communication point
 
     @property
     def field(self) -> str:
@@ -134,7 +136,7 @@ VARIABLES: list[Var] = [
         "controller thrust command per motor after saturation", "N"),
     # --- energy bookkeeping (checks and plant-level use) ---------------------------
     Var("energy.E_mech", "Real", OUT, "continuous",
-        "kinetic + gravitational + elastic contact energy of the chain", "J"),
+        "kinetic + gravitational + elastic contact energy of the chain", "J", bulk=True),
     Var("energy.W_motor", "Real", OUT, "continuous", "work done by the motors since start", "J"),
     Var("energy.W_damping", "Real", OUT, "continuous",
         "energy dissipated by contact hysteresis since start", "J"),
@@ -231,25 +233,25 @@ VARIABLES: list[Var] = [
           "saturated at +-drive.F_max (logged)", "N", 0.0, -1e6, 1e6) for k in range(1, N_GROUPS + 1)],
     *[v for k in range(1, N_GROUPS + 1) for v in (
         Var(f"drive.group{k}.F_total", "Real", OUT, "continuous",
-            f"thrust the motors of group {k} apply to the chain (the groups sum to drive.F_total)", "N"),
+            f"thrust the motors of group {k} apply to the chain (the groups sum to drive.F_total)", "N", bulk=True),
         Var(f"drive.group{k}.v", "Real", OUT, "continuous",
             f"tangential speed of the chain over group {k}'s motors (plates weighted by their coverage; "
-            "0 where no plate covers them)", "m/s"),
+            "0 where no plate covers them)", "m/s", bulk=True),
         Var(f"drive.group{k}.P", "Real", OUT, "continuous",
-            f"power of group {k}'s thrust (its plates' thrust times their tangential speed)", "W"))],
+            f"power of group {k}'s thrust (its plates' thrust times their tangential speed)", "W", bulk=True))],
     Var("chain.joint.F_max", "Real", OUT, "continuous",
-        "largest joint force in the chain (axial and radial together)", "N"),
+        "largest joint force in the chain (axial and radial together)", "N", bulk=True),
     Var("chain.joint.F_max_cart", "Integer", OUT, "discrete",
-        "the cart whose front joint carries chain.joint.F_max"),
+        "the cart whose front joint carries chain.joint.F_max", bulk=True),
     Var("station.induction.s", "Real", P, "fixed",
         "arc position of the induction station (where items are put on carts), in [0, track length)",
         "m", 0.0, 0.0, 1e6),
     Var("station.chute.s", "Real", P, "fixed",
         "arc position of the chute (where items leave their carts), in [0, track length)", "m", 0.0, 0.0, 1e6),
     Var("station.induction.cart", "Integer", OUT, "discrete",
-        "the cart whose axle passed the induction station last (changes as the next cart passes)"),
+        "the cart whose axle passed the induction station last (changes as the next cart passes)", bulk=True),
     Var("station.chute.cart", "Integer", OUT, "discrete",
-        "the cart whose axle passed the chute last"),
+        "the cart whose axle passed the chute last", bulk=True),
     *[v for k in range(1, N_LOAD_PORTS + 1) for v in (
         Var(f"load{k}.cart", "Integer", IN, "discrete",
             f"item port {k}: the cart it loads (-1: idle); when the port's cart or mass changes, that cart "
@@ -258,7 +260,7 @@ VARIABLES: list[Var] = [
             f"item port {k}: the item mass on load{k}.cart (0: none); an item put on arrives with no speed "
             "(the cart shares its momentum with it), one taken off leaves at the cart's speed",
             "kg", 0.0, 0.0, 1000.0))],
-    Var("chain.items.mass", "Real", OUT, "discrete", "mass of all items on the carts", "kg"),
+    Var("chain.items.mass", "Real", OUT, "discrete", "mass of all items on the carts", "kg", bulk=True),
     Var("energy.E_items", "Real", OUT, "continuous",
         "mechanical energy the item ports changed (the inelastic loss of an item put on a moving cart, "
         "the items' weight): E_mech - E_items - W_motor + W_damping + W_rolling stays constant", "J"),

@@ -412,8 +412,8 @@ def test_an_output_read_alone_is_that_of_the_current_state(fmu_file):
     """The outputs that walk every cart are computed only when one of them is
     read (fmi2_glue: the bulk part). Each output read alone right after a
     step equals its value once every output is brought up to date at the
-    same state: an output the bulk part writes but its list misses would be
-    read stale."""
+    same state: an output the bulk part writes without its `bulk` flag in
+    the variable table would be read stale."""
     from lss_fmu.runner import ChainSimulator
     from lss_fmu.variables import VARIABLES
     outs = [v.name for v in VARIABLES if v.causality == "output" and v.type in ("Real", "Integer")]
