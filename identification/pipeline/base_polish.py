@@ -22,6 +22,8 @@ BASE_REFINE_EVALS = 60   # simulations of the base's refinement to its own optim
 PROFILE_POINTS = 9       # the base's least-determined variable scanned at this many values ...
 PROFILE_EVALS = 24       # ... the others refitted with this many simulations at each (profile_polish) ...
 ZOOM_EVALS = 8           # ... then Brent's method around the best value, at most this many profile points
+SEEN = 1.0               # a variable whose whole bound range moves S (linearised) by less than this, one chi^2
+                         # unit, is not seen by the record: the profile does not scan it
 STEP = 0.003             # difference step of the refinements, of each bound range: the CoR landscape is rough
                          # and its valleys narrow (e_SW to 0.005): 0.02 leads Levenberg-Marquardt astray
 
@@ -75,7 +77,13 @@ def profile_polish(base: IdentificationProblem, x: np.ndarray, w: np.ndarray, *,
     twenty times weaker than the other CoRs and many-valleyed) scanned over its
     range, the others refitted at each value (Levenberg-Marquardt, `evals`
     simulations); the best then refined with everything free. Returns (x, S,
-    info); x is the start when nothing is lower."""
+    info); x is the start when nothing is lower.
+
+    Only a variable the record sees is scanned (its whole range moves S by
+    SEEN or more): a start-stop's first 0.3 s, the drive saturated, does not
+    see the set point or the gains at all, and a scan over one of them would
+    only repeat the others' fit at every value. Nothing seen, nothing
+    scanned."""
     x = np.asarray(x, float)
     sim0 = base.simulate(x)
     _, S_start = weighted_residual(base, sim0, w)
@@ -87,7 +95,11 @@ def profile_polish(base: IdentificationProblem, x: np.ndarray, w: np.ndarray, *,
         return x, S_start, info
     lo, hi = np.array(base.bounds_array, float).T
     sens = np.array([math.sqrt(float(np.sum(g ** 2 * w))) * (hi[k] - lo[k]) for k, g in enumerate(cols)])
-    k = int(np.argmin(sens))
+    seen = np.flatnonzero(sens >= SEEN)
+    if seen.size == 0:
+        info["nfev"] = len(x) + 1
+        return x, S_start, info
+    k = int(seen[np.argmin(sens[seen])])
     name = base.free[k]
     others = tuple(n for n in base.free if n != name)
     best = (S_start, x)
