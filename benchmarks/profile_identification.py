@@ -228,18 +228,30 @@ def table(entry: dict) -> str:
     return "\n".join(lines)
 
 
-def ab_table(before: dict, after: dict) -> str:
+def ab_table(before: dict, after: dict, unit: str = "cpu") -> str:
     """Two profiles of the same measurements side by side: CPU-s with their ratio, the
-    stages that changed most, f and the largest CoR error (e_JA, e_SW, e_RW)."""
-    out = ["| measurement (layout) | CPU-s, before -> after | first window: rest fit + complex | growing windows | "
-           "whole-record refinement | first window: profile | f, before -> after | "
+    stages that changed most, f and the largest CoR error (e_JA, e_SW, e_RW). `unit`
+    "record-s": the stages in simulated record-seconds (the machine-independent cost)
+    instead of CPU-s, with the intervals and the total beside the CPU."""
+    key = {"cpu": "cpu_s", "record-s": "simulated_record_s"}[unit]
+    names = ["growing windows", "whole record / refinement", "first window: profile"]
+    heads = ["growing windows", "whole-record refinement", "first window: profile"]
+    if unit == "record-s":
+        names.insert(2, "whole record / intervals")
+        heads.insert(2, "intervals")
+    total = ["simulated record-s, before -> after"] if unit == "record-s" else []
+    out = ["| measurement (layout) | CPU-s, before -> after | " + "".join(f"{t} | " for t in total)
+           + "first window: rest fit + complex | " + " | ".join(heads) + " | f, before -> after | "
            "largest error of e_JA, e_SW, e_RW |",
-           "|---|---|---|---|---|---|---|---|"]
+           "|---|---|" + "---|" * (len(total) + 1 + len(heads)) + "---|---|"]
     old = {m["measurement"]: m for m in before["rows"]}
 
     def stage(m, name):   # a stage nested in the rest fit counts as the rest fit's
-        return sum(s["cpu_s"] for s in m["stages"] if (name in s["stage"] if name == "rest fit" else
-                                                        s["stage"].endswith(name) and "rest fit" not in s["stage"]))
+        return sum(s.get(key, 0.0) for s in m["stages"] if (name in s["stage"] if name == "rest fit" else
+                                                             s["stage"].endswith(name) and "rest fit" not in s["stage"]))
+
+    def simulated(m):
+        return sum(s.get("simulated_record_s", 0.0) for s in m["stages"])
 
     def worst(m):
         return max(abs(m["cor_error"][k]) for k in ("e_JA", "e_SW", "e_RW"))
@@ -247,13 +259,19 @@ def ab_table(before: dict, after: dict) -> str:
         a = old.get(b["measurement"])
         if a is None:
             continue
-        cells = [f"{stage(a, 'rest fit') + stage(a, 'complex'):.0f} -> "
-                 f"{stage(b, 'rest fit') + stage(b, 'complex'):.0f}"]
-        cells += [f"{stage(a, n):.0f} -> {stage(b, n):.0f}" for n in
-                  ("growing windows", "whole record / refinement", "first window: profile")]
+        cells = [f"{simulated(a):.0f} -> {simulated(b):.0f} ({simulated(b) / simulated(a):.2f})"] if total else []
+        cells += [f"{stage(a, 'rest fit') + stage(a, 'complex'):.0f} -> "
+                  f"{stage(b, 'rest fit') + stage(b, 'complex'):.0f}"]
+        cells += [f"{stage(a, n):.0f} -> {stage(b, n):.0f}" for n in names]
         out.append(f"| {b['measurement']} ({b['layout'].replace('layout', '')}) | {a['cpu_s']:.0f} -> "
                    f"{b['cpu_s']:.0f} ({b['cpu_s'] / a['cpu_s']:.2f}) | {' | '.join(cells)} | "
                    f"{a['f']:.4f} -> {b['f']:.4f} | {worst(a):.4f} -> {worst(b):.4f} |")
+    if total:
+        pairs = [(old[b["measurement"]], b) for b in after["rows"] if b["measurement"] in old]
+        sa, sb = sum(simulated(a) for a, _ in pairs), sum(simulated(b) for _, b in pairs)
+        ca, cb = sum(a["cpu_s"] for a, _ in pairs), sum(b["cpu_s"] for _, b in pairs)
+        out.append(f"| all {len(pairs)} | {ca:.0f} -> {cb:.0f} ({cb / ca:.2f}) | {sa:.0f} -> {sb:.0f} ({sb / sa:.2f}) |"
+                   + " |" * (3 + len(heads)))
     return "\n".join(out)
 
 
@@ -269,10 +287,12 @@ def main(argv=None) -> int:
                     "docs/benchmarks.md and stop")
     ap.add_argument("--ab", metavar="TAG", default=None, help="write the side-by-side table of the two --json "
                     "files (before, after) between docs/benchmarks.md's TAG markers and stop")
+    ap.add_argument("--ab-unit", choices=("cpu", "record-s"), default="cpu",
+                    help="--ab's stages in CPU-s or in simulated record-seconds (with the intervals and the total)")
     args = ap.parse_args(argv)
     if args.ab:
         before, after = (json.loads(Path(j).read_text()) for j in args.json)
-        write_between(ROOT / "docs" / "benchmarks.md", args.ab, ab_table(before, after))
+        write_between(ROOT / "docs" / "benchmarks.md", args.ab, ab_table(before, after, args.ab_unit))
         return 0
     if args.table or args.doc:
         texts = [table(json.loads(Path(j).read_text())) for j in args.json]
