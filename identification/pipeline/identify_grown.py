@@ -223,12 +223,12 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
                    channel_weights=w, profile_points=PROFILE_POINTS, keep_points=True, reset_unseen=True,
                    start=x_start, retry=retry, workers=workers, hold_rest=hold_rest,
                    whole=not (WHOLE_TO_REFINEMENT and same_metric and int(refine_evals) > 0))
-    tick("grown", float(info["windows"][-1]["S_per_sample"]) * problem.samples.size)
     if started is not None:
         info["nfev"] += started["nfev"]
     elif info.get("retry") and info["retry"]["taken"]:
         started = box["info"]
     f = float(problem(x))
+    tick("grown", f)   # on the whole record: the last window may be shorter (grow's `whole`)
     local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal)
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
