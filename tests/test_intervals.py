@@ -160,3 +160,48 @@ def test_intervals_outside_the_stencil_are_differenced_at_the_point():
     got = intervals(p, far, linearised=(truth, steps))
     assert p.runs > before + 4
     assert [iv.value for iv in got] == list(far)
+
+
+def test_a_refinement_watching_a_chaotic_variable_stops_at_its_start():
+    """refine's stop_rough: a watched column rough at its step and at half of
+    it ends the refinement where it started (no step taken), and the
+    intervals from that Jacobian call the variable rough, as they would
+    after any refinement; a smooth watched variable lets it walk on."""
+    p = _Bent(chaos=0.5)
+    x0 = np.array([0.45, 0.55])
+    r = refine(p, x0, max_evals=100, central=True, stop_rough=[0])
+    assert r.rough == (0,) and np.array_equal(r.x, x0) and r.iterations == 0
+    assert r.nfev == 1 + 2 * 2 + 2 + 2    # the start, the Jacobian, its steps scaled, a's two at half the step
+    a = {iv.name: iv for iv in intervals(p, r.x, r.sim, linearised=(r.at, r.steps))}["a"]
+    assert not a.smooth
+    walked = refine(p, x0, max_evals=100, central=True, stop_rough=[1])
+    assert walked.rough == () and walked.iterations >= 1 and walked.f < r.f
+
+
+def test_a_bend_rough_only_at_the_first_step_leaves_the_path_as_it_was():
+    """A curved response is rough at the first step and smooth at half of it:
+    the rule spends its two simulations and the refinement is the one without
+    it, point for point."""
+    p = _Bent(c=1.2 / _rough_of_a(_Bent(c=1.0)))
+    x0 = np.array([0.47, 0.52])
+    plain = refine(p, x0, max_evals=100, central=True)
+    watched = refine(p, x0, max_evals=100, central=True, stop_rough=[0, 1])
+    assert watched.rough == ()
+    assert np.array_equal(plain.x, watched.x) and plain.f == watched.f
+    assert watched.nfev == plain.nfev + 2
+
+
+class _BentCoR(_Bent):
+    free = ("contact.e_SW", "b")
+
+
+def test_the_local_stage_before_a_shorter_window_stops_where_a_cor_is_rough():
+    from identification.pipeline.identify import local_stage
+    p = _BentCoR(chaos=0.5)
+    x0 = np.array([0.45, 0.55])
+    f0 = float(np.sum((p.samples - p.simulate(x0)) ** 2))
+    cut = local_stage(p, x0, f0, 200, True, None, stop_rough=True)
+    assert cut["refined"]["rough_at_start"] == ["contact.e_SW"] and np.array_equal(cut.get("x", x0), x0)
+    assert not {iv.name: iv for iv in cut["intervals"]}["contact.e_SW"].smooth
+    whole = local_stage(p, x0, f0, 200, True, None)
+    assert "rough_at_start" not in whole["refined"] and whole["refined"]["nfev"] > cut["refined"]["nfev"]

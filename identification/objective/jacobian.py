@@ -46,7 +46,7 @@ def exact_columns(problem, x: np.ndarray) -> dict:
 def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
              rel_step: float = REL_STEP, weights: Optional[np.ndarray] = None,
              steps: Optional[np.ndarray] = None, guess: Optional[np.ndarray] = None,
-             recheck: Optional[float] = None, exact: bool = True) -> tuple:
+             recheck: Optional[float] = None, exact: bool = True, only=None) -> tuple:
     """(J as (n_samples, n_channels, n_free), the steps used, the roughness of
     each column): central differences inside the bounds, one-sided at a bound;
     the roughness is |forward - backward| / |their mean| in the metric
@@ -67,6 +67,8 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     The simulations run in rounds (each column's first step, its rescaled
     steps, its second step), side by side on the problem's pool when it has
     one (identification.objective.parallel): the same points either way.
+
+    `only`: the columns to difference (the others stay zero, their step 0).
 
     `exact`: where the problem asks for them (its `sensitivities`), the
     columns the FMU can differentiate itself come from its forward
@@ -104,7 +106,7 @@ def jacobian(problem: IdentificationProblem, x: np.ndarray, sim0: np.ndarray,
     for k, col in known.items():
         J[:, :, k] = col
         used[k] = EXACT_STEP * span[k]
-    todo = [k for k in range(n) if k not in known]
+    todo = [k for k in range(n) if k not in known and (only is None or k in only)]
     first = steps if steps is not None else guess
     # a carried step at or below the followers' on a column the core can give is that column's last exact step
     # (its run failed this time): no step to difference with

@@ -27,7 +27,7 @@ from typing import Optional
 import numpy as np
 
 from lss_fmu.atomic import write_json_atomic
-from lss_fmu.design import LAYOUT_DEPENDENT, symbol
+from lss_fmu.design import CORS, LAYOUT_DEPENDENT, symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
 from ..objective.problem import LINEARISABLE, IdentificationProblem
@@ -216,9 +216,14 @@ def _presolve(problem, evals: int, seed, journal, progress, f_tol, x_tol, worker
                     progress=progress, f_tol=f_tol, x_tol=x_tol, workers=workers)
 
 
-def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path]) -> dict:
+def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path],
+                stop_rough: bool = False) -> dict:
     """The refinement and the intervals after the complex, kept in
-    JOURNAL.local.json (atomically) for the resume of an interrupted run."""
+    JOURNAL.local.json (atomically) for the resume of an interrupted run.
+    `stop_rough`: a shorter window follows where a CoR is rough here (the
+    shrink stage), so the refinement stops at its start where its first
+    Jacobian finds one rough (refine's stop_rough): the intervals would call
+    it rough after any refinement."""
 
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
@@ -230,7 +235,7 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
     # f at the start, as this objective gives it: a refinement kept from an objective that has changed
     # since (journal.vouch) is not taken up
     key = {"start": point_key(x), "f_start": float(f), "refine_evals": int(refine_evals),
-           "uncertainty": bool(uncertainty)}
+           "uncertainty": bool(uncertainty), **({"stop_rough": True} if stop_rough else {})}
     if side is not None and side.exists():
         try:
             kept = json.loads(side.read_text())
@@ -244,9 +249,13 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
             pass  # unreadable: computed again
     out, sim, lin = {}, None, None
     if refine_evals > 0:
-        ref = refine(problem, x, max_evals=int(refine_evals), rel_step=REFINE_STEP, f_rtol=1e-4, central=True)
+        watch = [k for k, n in enumerate(problem.free) if n in CORS] if stop_rough else []
+        ref = refine(problem, x, max_evals=int(refine_evals), rel_step=REFINE_STEP, f_rtol=1e-4, central=True,
+                     stop_rough=watch)
         out["refined"] = {"f_start": float(f), "f": float(ref.f), "nfev": int(ref.nfev),
                           "iterations": int(ref.iterations)}
+        if ref.rough:
+            out["refined"]["rough_at_start"] = [problem.free[k] for k in ref.rough]
         if ref.f < f:
             out["x"], out["f"], sim = ref.x.tolist(), float(ref.f), ref.sim
             x = ref.x

@@ -229,7 +229,9 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
         started = box["info"]
     f = float(problem(x))
     tick("grown", f)   # on the whole record: the last window may be shorter (grow's `whole`)
-    local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal)
+    duration = float(problem.times[-1])
+    shorter = shrink and uncertainty and any(float(s) < duration - 1e-9 for s in ladder)
+    local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal, stop_rough=shorter)
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
     nfev = int(info["nfev"]) + 1 + int((local.get("refined") or {}).get("nfev", 0))

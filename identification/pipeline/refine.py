@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Optional, Union
+from typing import Optional, Sequence, Union
 
 import numpy as np
 
 from ..objective.jacobian import demean_columns, jacobian, one_sided_jacobian, weights
 from ..objective.problem import IdentificationProblem, tared
-from ..objective.uncertainty import noise_level
+from ..objective.uncertainty import ROUGH, noise_level
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +36,8 @@ class Refined:
     steps: Optional[np.ndarray] = None  # central: the difference steps the Jacobians used
     at: Optional[np.ndarray] = None     # central: where the last Jacobian was differenced (with `steps`; None
                                         # when it was updated by Broyden's formula after that)
+    rough: tuple = ()                   # stop_rough: the watched variables found rough at the start (it
+                                        # stopped there)
 
 
 def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> tuple:
@@ -50,7 +52,8 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
            f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None,
-           steps: Optional[np.ndarray] = None, broyden: Union[bool, str] = False) -> Refined:
+           steps: Optional[np.ndarray] = None, broyden: Union[bool, str] = False,
+           stop_rough: Sequence[int] = ()) -> Refined:
     """Levenberg-Marquardt from x within the problem's bounds, at most
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
@@ -66,7 +69,12 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     differenced again, and the refinement stops where a step gains less than
     `f_rtol`; "refresh": such a step from an updated Jacobian has it
     differenced again first, and the refinement stops only where a step from
-    a differenced one gains too little."""
+    a differenced one gains too little. `stop_rough` (central): variables
+    whose column of the first Jacobian is rough (forward and backward
+    differences part by ROUGH of their mean or more, at its step and again
+    at half of it, as the intervals test it) stop the refinement there, at
+    the start point (`rough` names them): on that window the response to
+    them is chaotic, and no refinement makes the intervals call it smooth."""
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
@@ -86,11 +94,18 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
         if fresh:
             if central:
                 w = 1.0 / noise_level(problem.samples - sim) ** 2
-                J, used, _ = jacobian(problem, x, sim, rel_step, w, steps, guess=guess)
+                J, used, rough = jacobian(problem, x, sim, rel_step, w, steps, guess=guess)
                 nfev += per_jacobian + (len(x) if steps is None else 0)
                 steps = used
                 raw = [J[:, :, k] for k in range(len(x)) if used[k] > 0]
                 at = x.copy()
+                if it == 0 and stop_rough:
+                    chaotic, spent = _still_rough(problem, x, sim, w, used, rough, stop_rough)
+                    nfev += spent
+                    if chaotic:
+                        log.info("refine: %s rough at the start: stopped there",
+                                 ", ".join(problem.free[k] for k in chaotic))
+                        return Refined(x, f, f_start, nfev, it, sim, steps, at, tuple(chaotic))
             else:
                 raw = one_sided_jacobian(problem, x, sim, rel_step=rel_step)
                 nfev += per_jacobian
@@ -135,6 +150,18 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
             break
         fresh = not broyden
     return Refined(x, f, f_start, nfev, it, sim, steps, at)
+
+
+def _still_rough(problem, x, sim, w, used, rough, watch) -> tuple:
+    """(the watched columns rough at their step and at half of it, the
+    simulations spent): the intervals' test (uncertainty.ROUGH, recheck at
+    half the step), the columns of the Jacobian itself left as they are."""
+    first = [k for k in watch if not rough[k] < ROUGH]
+    if not first:
+        return [], 0
+    half = np.where(np.isin(np.arange(len(x)), first), 0.5 * np.asarray(used, float), 0.0)
+    _, _, again = jacobian(problem, x, sim, weights=w, steps=half, exact=False, only=first)
+    return [k for k in first if not again[k] < ROUGH], 2 * len(first)
 
 
 def _broyden(raw: list, z: np.ndarray, dy: np.ndarray, span: np.ndarray) -> list:

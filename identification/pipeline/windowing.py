@@ -80,7 +80,7 @@ def shrink_window(problem, res, trail, ladder, refine_evals, journal, t0):
         q = truncated(problem, s)
         jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{s:g}.jsonl")
         f_start = float(q(x_start))
-        local = local_stage(q, x_start, f_start, refine_evals, True, jr)
+        local = local_stage(q, x_start, f_start, refine_evals, True, jr, stop_rough=s > steps[-1])
         x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f_start \
             else (x_start, f_start)
         extra = int((local.get("refined") or {}).get("nfev", 0)) + 1
