@@ -14,7 +14,8 @@ trigger point is the same to 1 % with the CoRs at the truth or 0.2 off).
 S is periodic in it with the carts' pitch (valleys about 0.1 m wide on that
 record), so a local fit from the marks' value finds the nearest valley, not
 the deepest. `fit_rest` fits the pretension and every record's trigger point:
-the pretension alone, the scan of each trigger point, then all together.
+the pretension alone (a scan over its bounds, then a local fit), the scan of
+each trigger point, then all together.
 The valleys' places move with the pretension (on a layout-5 record, 5 % of
 pretension moved the deepest valley 0.45 m, from the truth's to one S per
 sample 6 times higher), so where the joint fit leaves a record off the
@@ -43,6 +44,7 @@ log = logging.getLogger(__name__)
 COARSE = 41    # trigger points tried over the trigger's bounds ...
 FINE = 11      # ... then over two coarse steps around the best
 REST_COARSE = 21   # fit_rest's grid (0.05 m on the usual 1 m bounds, its Levenberg-Marquardt the fine step)
+SHARED_COARSE = 41  # fit_rest's grid of the pretension (2.5 % of the nominal on the usual bounds, half to 1.5 x it)
 ROUNDS = 3         # fit_rest's scans of the trigger points at most, each at the pretension fitted before
 OFF_Z = 3.0        # a record off the noise: S this many sd of chi^2 above its mean, no margin (growing's retry)
 
@@ -86,8 +88,9 @@ def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
     scan's of one record each): the variables of `rest` (the
     pretension, the trigger points: growing.at_rest) fitted on q's window
     with every other variable at its start value (module docstring):
-    Levenberg-Marquardt on the pretension, each trigger point scanned, then
-    Levenberg-Marquardt on all of them; then, while that leaves a record off
+    the pretension scanned over its bounds and Levenberg-Marquardt on it
+    from the best, each trigger point scanned, then Levenberg-Marquardt on
+    all of them; then, while that leaves a record off
     the noise, its trigger point scanned again at the pretension fitted
     (moved only to a deeper valley) and Levenberg-Marquardt on all again,
     ROUNDS scans in all, stopping where no trigger point moves.
@@ -97,16 +100,20 @@ def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
     qr = only(q, rest)
     vals = dict(zip(qr.free, map(float, qr.x0_vector())))
     if TRIGGER not in qr.free:
-        return _levenberg_marquardt(qr, vals, channel_weights, max_evals)
+        used = _scan_shared(qr, vals, channel_weights)
+        vals, more = _levenberg_marquardt(qr, vals, channel_weights, max_evals)
+        return vals, used + more
     # the pretension first, the trigger points where they are: where the chain stands moves S by valleys,
     # but the valleys' places depend on the pretension (on a layout-2 record the scan at the bounds' middle
     # pretension put one trigger point 0.37 m off)
     shared = [n for n in qr.free if n != TRIGGER and "@" not in n]
     used = 0
     if shared:
-        got, used = _levenberg_marquardt(only(without(qr, (), vals), shared), {n: vals[n] for n in shared},
-                                         channel_weights, max_evals)
+        qs = only(without(qr, (), vals), shared)
+        used = _scan_shared(qs, vals, channel_weights)
+        got, more = _levenberg_marquardt(qs, {n: vals[n] for n in shared}, channel_weights, max_evals)
         vals.update(got)
+        used += more
     parts = qr.parts if isinstance(qr, JointProblem) else [qr]
     scanned = range(len(parts))
     for round_ in range(ROUNDS):
@@ -126,6 +133,31 @@ def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
         if not scanned:
             break
     return vals, used
+
+
+def _scan_shared(qs, vals: dict, channel_weights) -> int:
+    """Simulations: each free variable of qs (the pretension) put where
+    SHARED_COARSE points over its bounds fit q's window best, the others at
+    `vals`, which it updates. S along the pretension is rough on a scale of
+    1 % (Levenberg-Marquardt from a nominal 7 % off stopped 6 % off) but
+    falls to one valley on the 2.5 % grid, with the trigger points at
+    their marks."""
+    w = weights(qs) if channel_weights is None else np.asarray(channel_weights, float)
+    used = 0
+    for name in qs.free:
+        lo, hi = qs.bounds[name]
+        best, S_best = vals[name], np.inf
+        for v in np.linspace(lo, hi, SHARED_COARSE):
+            x = np.array([v if n == name else vals[n] for n in qs.free])
+            used += 1
+            try:
+                S = weighted_residual(qs, qs.simulate(x), w)[1]
+            except Exception:   # a point that does not simulate is infinitely far
+                continue
+            if S < S_best:
+                best, S_best = float(v), S
+        vals[name] = best
+    return used
 
 
 def _block(parts, k: int, channel_weights) -> np.ndarray:
