@@ -137,7 +137,7 @@ def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
 
 def _scan_shared(qs, vals: dict, channel_weights) -> int:
     """Simulations: each free variable of qs (the pretension) put where
-    SHARED_COARSE points over its bounds fit q's window best, the others at
+    SHARED_COARSE points over its bounds fit qs's window best, the others at
     `vals`, which it updates. S along the pretension is rough on a scale of
     1 % (Levenberg-Marquardt from a nominal 7 % off stopped 6 % off) but
     falls to one valley on the 2.5 % grid, with the trigger points at
