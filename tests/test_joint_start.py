@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.pipeline import growing
+from identification.pipeline import growing, rest_fit
 from identification.objective.joint import JointProblem, own
 from identification.pipeline.joint_start import single_start
 from identification.pipeline.rest_fit import trigger_scan
@@ -14,7 +14,9 @@ from identification.objective.problem import from_measurement, weighted_residual
 from identification.objective.uncertainty import intervals
 from identification.pipeline.windowing import truncated
 from lss_fmu.design import TRIGGER
-from lss_fmu.rig import DEFAULT_SEED, load_truth, true_design_values
+from lss_fmu.measurement import load_measurement
+from lss_fmu.rig import DEFAULT_SEED, folder_name, load_truth, run_measurement, true_design_values
+from lss_fmu.runner import ChainSimulator
 
 NUMBER, SECONDS, WINDOW = 2, 1.2, 0.6   # layout 1: a start-stop (its stop at 1 s), the first 0.6 s
 LAYOUT5_NUMBER = 16   # a layout-5 sorter whose trigger points' valleys move with the pretension
@@ -272,16 +274,13 @@ def test_the_rest_fit_finds_the_pretension_and_each_trigger_point_from_another_v
 
 
 def _records(tmp_path_factory, number: int, seed: int, tag: str) -> list:
-    from lss_fmu import measurement as M
-    from lss_fmu.rig import folder_name, run_measurement
-    from lss_fmu.runner import ChainSimulator
     out = []
     for k in range(2):
         folder = tmp_path_factory.mktemp(f"{tag}_r{k}")
         with ChainSimulator() as s:
             run_measurement("recovery", number, folder, s, seed=seed, protocol="start-stop", lap_seconds=SECONDS,
                             repeat=k)
-        out.append(M.load_measurement(folder / folder_name(number)))
+        out.append(load_measurement(folder / folder_name(number)))
     return out
 
 
@@ -300,7 +299,6 @@ def _rest_fit_errors(jp, truth, pretension: float, monkeypatch, **patches) -> tu
     simulations) of fit_rest on jp's first 0.3 s from `pretension` (the
     trigger points at their marks, the CoRs at their start values), with
     rest_fit's names in `patches` replaced."""
-    from identification.pipeline import rest_fit
     for name, value in patches.items():
         monkeypatch.setattr(rest_fit, name, value)
     q = truncated(jp, jp.times[0] + 0.3)
@@ -315,12 +313,11 @@ def _rest_fit_errors(jp, truth, pretension: float, monkeypatch, **patches) -> tu
 def test_the_rest_fit_scans_the_pretension_over_its_bounds(layout2_records, monkeypatch):
     """A layout-2 sorter whose pretension lies 7 % above its nominal value,
     the rest fit started from the nominal: S along the pretension is rough
-    on a scale of 1 %, and Levenberg-Marquardt from there stops about 6 %
-    off, where the trigger points' deepest valleys lie a valley or more off
+    on a scale of 1 %, and Levenberg-Marquardt from there stops short of
+    the truth, where the trigger points' deepest valleys lie a valley or more off
     (and a second scan at that pretension finds the same ones). The scan
     over the bounds first: the pretension within 1 %, each trigger point
     within 3 cm. Without the scan the same start ends a valley off."""
-    from identification.pipeline import rest_fit
     jp, truth = _joint(layout2_records)
     nominal = jp.x0["chain.pretension"]
     assert truth[0]["chain.pretension"] / nominal - 1 > 0.05   # the case this test is about
@@ -340,7 +337,6 @@ def test_the_rest_fit_scans_again_at_the_pretension_it_found(layout5_records, mo
     record ends 0.26 m off). With the scans repeated at the fitted
     pretension both trigger points come within 3 cm and the pretension
     within 0.5 %, and a trigger point was scanned more than once."""
-    from identification.pipeline import rest_fit
     jp, truth = _joint(layout5_records)
     scans = []
     real_scan = rest_fit.trigger_scan
