@@ -39,7 +39,8 @@ from identification.pipeline.windowing import truncated  # noqa: E402
 from lss_fmu.atomic import write_json_atomic  # noqa: E402
 from lss_fmu.design import TRIGGER  # noqa: E402
 from lss_fmu.measurement import load_measurement  # noqa: E402
-from lss_fmu.rig import DEFAULT_SEED, folder_name, generate_set, load_truth, parse_numbers, true_design_values  # noqa: E402
+from lss_fmu.rig import (DEFAULT_SEED, folder_name, generate_set, load_truth, parse_numbers,  # noqa: E402
+                         true_design_values)
 
 REPEATS = 3
 
@@ -70,7 +71,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     numbers = parse_numbers(args.measurements)
-    out = {"command": " ".join(sys.argv), "code": hash_sources(hashlib.sha256()).hexdigest()[:12], "valley_m": args.valley, "seeds": {}}
+    out = {"command": " ".join(sys.argv), "code": hash_sources(hashlib.sha256()).hexdigest()[:12],
+           "valley_m": args.valley, "seeds": {}}
     for seed in (int(s) for s in args.rig_seeds.split(",")):
         dirs = [Path(args.work) / f"s{seed}" / ("data" if k == 0 else f"data_r{k}") for k in range(REPEATS)]
         fmu = set_fmu(dirs[0])   # the FMU that made the records already there

@@ -35,6 +35,7 @@ from lss_fmu.variables import FORCE_CHANNELS
 from ..objective.jacobian import weights
 from ..objective.joint import JointProblem, own
 from ..objective.problem import weighted_residual
+from ..objective.uncertainty import at_noise
 from .base_polish import STEP
 from .refine import refine
 from .windowing import truncated
@@ -46,7 +47,7 @@ FINE = 11      # ... then over two coarse steps around the best
 REST_COARSE = 21   # fit_rest's grid (0.05 m on the usual 1 m bounds, its Levenberg-Marquardt the fine step)
 SHARED_COARSE = 41  # fit_rest's grid of the pretension (2.5 % of the nominal on the usual bounds, half to 1.5 x it)
 ROUNDS = 3         # fit_rest's scans of the trigger points at most, each at the pretension fitted before
-OFF_Z = 3.0        # a record off the noise: S this many sd of chi^2 above its mean, no margin (growing's retry)
+OFF_Z = 3.0        # a record off the noise: this many sd of chi^2 above its mean, no margin (growing's retry)
 
 
 def trigger_scan(part, values: dict, w: np.ndarray, first: float, *, coarse: int = COARSE,
@@ -115,7 +116,7 @@ def fit_rest(q, rest: Sequence[str], channel_weights, max_evals: int) -> tuple:
         vals.update(got)
         used += more
     parts = qr.parts if isinstance(qr, JointProblem) else [qr]
-    scanned = range(len(parts))
+    scanned = dict.fromkeys(range(len(parts)))   # record -> its S per sample where known
     for round_ in range(ROUNDS):
         # each round after the first scans at the pretension the joint fit left, the records it leaves off
         # the noise, and moves a trigger point only to a deeper valley: a pretension 5 % off moves a
@@ -184,12 +185,13 @@ def _record_S(part, k: int, vals: dict, w: np.ndarray) -> float:
 
 def _scan(parts, ks, vals: dict, channel_weights, deeper_only: bool) -> tuple:
     """(records whose trigger point moved, simulations): each record of `ks`
-    scanned (trigger_scan) with the shared values of `vals`, its value in
-    `vals` set to the scan's best; `deeper_only`: only where the best lies
-    in another valley (more than a grid step away) and fits better than
-    the value there."""
+    ({record: its S per sample at `vals`, None where not known}) scanned
+    (trigger_scan) with the shared values of `vals`, its value in `vals` set
+    to the scan's best; `deeper_only`: only where the best lies in another
+    valley (more than a grid step away) and fits better than the value
+    there."""
     moved, used = [], 0
-    for k in ks:
+    for k, S_now in ks.items():
         part, w = parts[k], _block(parts, k, channel_weights)
         pk = _on_trigger(part, vals)
         lo, hi = pk.bounds[TRIGGER]
@@ -199,8 +201,9 @@ def _scan(parts, ks, vals: dict, channel_weights, deeper_only: bool) -> tuple:
         if not np.isfinite(S):   # no point simulated: the value before stands
             continue
         if deeper_only:
-            used += 1
-            if abs(s - vals[own(k)]) <= (hi - lo) / (REST_COARSE - 1) or S >= _record_S(part, k, vals, w):
+            if S_now is None:
+                S_now, used = _record_S(part, k, vals, w), used + 1
+            if abs(s - vals[own(k)]) <= (hi - lo) / (REST_COARSE - 1) or S >= S_now:
                 continue
         vals[own(k)] = s
         moved.append(k)
@@ -208,16 +211,17 @@ def _scan(parts, ks, vals: dict, channel_weights, deeper_only: bool) -> tuple:
 
 
 def _off_noise(parts, vals: dict, channel_weights) -> tuple:
-    """(records off the noise at `vals`, simulations): S per sample more than
-    OFF_Z sd of chi^2 above 1 in the declared noise's metric; without one
-    (no `channel_weights`) every record, as none can be said at the noise."""
+    """({record off the noise at `vals`: its S per sample}, simulations):
+    off by uncertainty.at_noise's test in the declared noise's metric, OFF_Z
+    sd and no margin; without that metric (no `channel_weights`, or not the
+    likelihood objective) every record, as none can be said at the noise."""
     if channel_weights is None:
-        return list(range(len(parts))), 0
-    off = []
+        return dict.fromkeys(range(len(parts))), 0
+    off = {}
     for k, part in enumerate(parts):
-        size = np.size(part.samples)
-        if _record_S(part, k, vals, _block(parts, k, channel_weights)) > 1.0 + OFF_Z * np.sqrt(2.0 / size):
-            off.append(k)
+        S = _record_S(part, k, vals, _block(parts, k, channel_weights))
+        if at_noise(part, S * np.shape(part.samples)[1], z=OFF_Z, margin=0.0) is not True:
+            off[k] = S
     return off, len(parts)
 
 
