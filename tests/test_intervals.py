@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from identification.objective.jacobian import jacobian
-from identification.objective.uncertainty import IDENTIFIABLE_WIDTH, ROUGH, Z95, inside_stencil, intervals
+from identification.objective.uncertainty import (IDENTIFIABLE_WIDTH, ROUGH, Z95, claimable_within,
+                                                 inside_stencil, intervals)
 from identification.pipeline.refine import refine
 
 
@@ -200,8 +201,53 @@ def test_the_local_stage_before_a_shorter_window_stops_where_a_cor_is_rough():
     p = _BentCoR(chaos=0.5)
     x0 = np.array([0.45, 0.55])
     f0 = float(np.sum((p.samples - p.simulate(x0)) ** 2))
-    cut = local_stage(p, x0, f0, 200, True, None, stop_rough=True)
+    cut = local_stage(p, x0, f0, 200, True, None, shorter=0.5)
     assert cut["refined"]["rough_at_start"] == ["contact.e_SW"] and np.array_equal(cut.get("x", x0), x0)
-    assert not {iv.name: iv for iv in cut["intervals"]}["contact.e_SW"].smooth
+    sw = {iv.name: iv for iv in cut["intervals"]}["contact.e_SW"]
+    assert not sw.smooth and sw.claimable_shorter is True
     whole = local_stage(p, x0, f0, 200, True, None)
     assert "rough_at_start" not in whole["refined"] and whole["refined"]["nfev"] > cut["refined"]["nfev"]
+    assert {iv.name: iv for iv in whole["intervals"]}["contact.e_SW"].claimable_shorter is None
+
+
+class _Late(_BentCoR):
+    """`_BentCoR` whose response to the CoR, smooth and chaotic parts alike,
+    starts at `onset` s: the samples before it hold nothing of it."""
+
+    def __init__(self, onset: float = 0.5, **kw):
+        self.onset = onset
+        super().__init__(**kw)
+
+    def simulate(self, x):
+        a, b = np.asarray(x, float)
+        late = (self.times >= self.onset)[:, None]
+        return late * (super().simulate(x) - b * self.h) + b * self.h
+
+
+def test_a_shorter_window_claims_only_what_its_rows_hold():
+    """claimable_within: the Jacobian's rows up to the shorter window's end
+    decide; a variable whose response starts after it cannot be claimed
+    there, one that acts throughout can."""
+    p = _Late(onset=0.5)
+    sim = p.simulate(p.truth)
+    J, steps, _ = jacobian(p, p.truth, sim, weights=1.0 / np.mean((p.samples - sim) ** 2, axis=0))
+    res = p.samples - sim
+    assert list(claimable_within(p, J, res, steps, 1.0)) == [True, True]
+    assert list(claimable_within(p, J, res, steps, 0.4)) == [False, True]
+    assert list(claimable_within(p, J, res, steps, 0.0)) == [False, False]   # fewer than two samples
+
+
+def test_a_rough_cor_the_shorter_window_cannot_claim_does_not_stop_the_refinement():
+    """Rough on this window, but its response starts after the shorter
+    window's end: that window would not claim it, so the refinement walks on
+    (as without a shorter window) and the interval says so."""
+    from identification.pipeline.identify import local_stage
+    p = _Late(onset=0.5, chaos=0.5)
+    x0 = np.array([0.45, 0.55])
+    f0 = float(np.sum((p.samples - p.simulate(x0)) ** 2))
+    before = local_stage(p, x0, f0, 200, True, None, shorter=0.4)
+    assert "rough_at_start" not in before["refined"] and before["refined"]["iterations"] >= 1
+    sw = {iv.name: iv for iv in before["intervals"]}["contact.e_SW"]
+    assert not sw.smooth and sw.claimable_shorter is False
+    after = local_stage(p, x0, f0, 200, True, None, shorter=0.7)   # the response is in that window
+    assert after["refined"]["rough_at_start"] == ["contact.e_SW"]

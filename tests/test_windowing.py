@@ -18,9 +18,10 @@ from identification.objective.uncertainty import Interval
 from identification.pipeline.windowing import troubles, truncated
 
 
-def _result(problem, x, f, rough=(), above=False):
+def _result(problem, x, f, rough=(), above=False, later=None):
     ivs = [Interval(n, float(v), 0.01, float(v) - 0.02, float(v) + 0.02, n not in rough, smooth=n not in rough,
-                    at_noise=not above) for n, v in zip(problem.free, x)]
+                    at_noise=not above, claimable_shorter=None if later is None else n in later)
+           for n, v in zip(problem.free, x)]
     return IdentificationResult(problem, np.asarray(x), 1.0, np.zeros(7), np.asarray(x), f, np.zeros(7), 1, 1, 0,
                                 "stand-in", np.array([f]), 0.5, intervals=ivs)
 
@@ -52,3 +53,14 @@ def test_above_the_noise_is_a_trouble_and_intervals_are_needed(start_stop_layout
     assert troubles(_result(p, p.x0_vector(), 7.0, rough=("contact.e_SW",))) == ["contact.e_SW"]
     assert troubles(_result(p, p.x0_vector(), 7.0)) == []
     assert troubles(dataclasses.replace(_result(p, p.x0_vector(), 7.0), intervals=None)) == []
+
+
+def test_a_rough_cor_the_shorter_window_cannot_claim_is_no_trouble(start_stop_layout7):
+    """Shortening for a CoR the shorter window would not claim either gains
+    nothing on it: only the rough CoRs that window could claim are troubles."""
+    p = from_measurement(start_stop_layout7, "LW", window=2.5, tare=True, objective="likelihood")
+    x = p.x0_vector()
+    rough = ("contact.e_JR", "contact.e_SW")
+    assert troubles(_result(p, x, 7.0, rough=rough, later=("contact.e_SW",))) == ["contact.e_SW"]
+    assert troubles(_result(p, x, 7.0, rough=rough, later=())) == []
+    assert troubles(_result(p, x, 30.0, rough=rough, later=(), above=True)) == ["above the noise"]

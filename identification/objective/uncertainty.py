@@ -23,6 +23,14 @@ linearisation means nothing, and no interval is claimed. Half the step
 tells the two apart: a smooth response's differences part by its
 curvature, in proportion to the step (strong near a CoR's lower bound, where
 the damping grows fast), a chaotic one's stay apart.
+
+Where a shorter window may follow (the shrink stage), each interval also
+says whether that window could claim the variable (`claimable_shorter`):
+the same Jacobian's rows up to the shorter window's end, in the same
+metric. The information is a sum over samples, so a shorter window holds
+at most what its rows hold here (at this point; a rough column overstates
+it), and a variable those rows leave too wide cannot be claimed there
+either.
 """
 from __future__ import annotations
 
@@ -55,11 +63,15 @@ class Interval:
     method: str = "jacobian"
     smooth: bool = True            # the simulation is smooth in this variable (forward ~ backward difference)
     at_noise: Optional[bool] = None  # likelihood objective: the fit reaches the declared noise (None: not known)
+    claimable_shorter: Optional[bool] = None  # the shorter window that may follow could claim it (None: not asked)
 
     def to_dict(self) -> dict:
-        return {"value": self.value, "sd": self.sd, "lower": self.lower, "upper": self.upper,
-                "identifiable": self.identifiable, "method": self.method, "smooth": self.smooth,
-                "at_noise": self.at_noise}
+        out = {"value": self.value, "sd": self.sd, "lower": self.lower, "upper": self.upper,
+               "identifiable": self.identifiable, "method": self.method, "smooth": self.smooth,
+               "at_noise": self.at_noise}
+        if self.claimable_shorter is not None:
+            out["claimable_shorter"] = self.claimable_shorter
+        return out
 
     def __str__(self) -> str:
         if self.at_noise is False:
@@ -97,13 +109,16 @@ def information_weights(r: np.ndarray) -> np.ndarray:
 
 
 def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[np.ndarray] = None,
-              rel_step: float = REL_STEP, linearised: Optional[tuple] = None) -> list:
+              rel_step: float = REL_STEP, linearised: Optional[tuple] = None,
+              shorter: Optional[float] = None) -> list:
     """One Interval per free variable of the problem at x (about 2 simulations
     per variable). `linearised`: (point, steps) of a central Jacobian already
     differenced with x inside its stencil (every variable within its step of
     the point; see inside_stencil): the Jacobian is taken there, at those
     steps, from the problem's kept simulations, and only a rough column's
-    second look at half its step is simulated."""
+    second look at half its step is simulated. `shorter`: the end (s) of a
+    shorter window that may follow; each interval then says whether that
+    window could claim its variable (claimable_within)."""
     x = np.asarray(x, float)
     sim0 = problem.simulate(x) if sim is None else np.asarray(sim, float)
     r = tared(problem.samples - sim0, problem.tare)
@@ -116,28 +131,54 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
                                    recheck=ROUGH, exact=False)
     else:
         J, steps, rough = jacobian(problem, x, sim0, rel_step, 1.0 / sigma2, recheck=ROUGH, exact=False)
-    if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
-        demean = np.abs((problem.samples - sim0).mean(axis=0)) <= problem.tare
-        J[:, demean, :] -= J[:, demean, :].mean(axis=0)
-    w = information_weights(r)                                 # per channel
-    F = np.einsum("tjk,j,tjl->kl", J, w, J)
+    sd = _sd(problem, J, problem.samples - sim0, steps)
     lo, hi = np.array(problem.bounds_array, float).T
+    at_noise = fit_at_noise(problem, r)
+    later = None if shorter is None else claimable_within(problem, J, problem.samples - sim0, steps, shorter)
+    out = []
+    for k, name in enumerate(problem.free):
+        a, b = max(lo[k], x[k] - Z95 * sd[k]), min(hi[k], x[k] + Z95 * sd[k])
+        smooth = bool(rough[k] < ROUGH)
+        ok = bool(smooth and at_noise is not False and _claimable(sd[k], lo[k], hi[k]))
+        out.append(Interval(name, float(x[k]), float(sd[k]), float(a), float(b), ok, smooth=smooth,
+                            at_noise=at_noise, claimable_shorter=None if later is None else bool(later[k])))
+    return out
+
+
+def _claimable(sd: float, lo: float, hi: float) -> bool:
+    """A 95 % interval of this sd is narrow enough to claim the variable."""
+    return bool(np.isfinite(sd) and 2.0 * Z95 * sd <= IDENTIFIABLE_WIDTH * (hi - lo))
+
+
+def _sd(problem, J: np.ndarray, residual: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """The standard deviations from a Jacobian (samples, channels, variables)
+    and the untared residual of the same samples, in the intervals' metric."""
+    J = np.array(J, float)
+    if problem.tare is not None:  # what the tare takes out of the residual, it takes out of its change too
+        demean = np.abs(residual.mean(axis=0)) <= problem.tare
+        J[:, demean, :] -= J[:, demean, :].mean(axis=0)
+    w = information_weights(tared(residual, problem.tare))      # per channel
+    F = np.einsum("tjk,j,tjl->kl", J, w, J)
     # the columns differ by orders of magnitude (a pretension in metres, a gain in N s/m): invert the
     # correlation form, else the weakly determined directions drown in the strong ones' rounding
     scale = np.sqrt(np.where(np.diag(F) > 0, np.diag(F), 1.0))
     cov = np.linalg.pinv(F / np.outer(scale, scale), rcond=1e-10) / np.outer(scale, scale)
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    sd = np.where((steps > 0) & (np.diag(F) > 0), sd, np.inf)
-    at_noise = fit_at_noise(problem, r)
-    out = []
-    for k, name in enumerate(problem.free):
-        a, b = max(lo[k], x[k] - Z95 * sd[k]), min(hi[k], x[k] + Z95 * sd[k])
-        smooth = bool(rough[k] < ROUGH)
-        ok = bool(smooth and at_noise is not False and np.isfinite(sd[k])
-                  and 2.0 * Z95 * sd[k] <= IDENTIFIABLE_WIDTH * (hi[k] - lo[k]))
-        out.append(Interval(name, float(x[k]), float(sd[k]), float(a), float(b), ok, smooth=smooth,
-                            at_noise=at_noise))
-    return out
+    return np.where((np.asarray(steps) > 0) & (np.diag(F) > 0), sd, np.inf)
+
+
+def claimable_within(problem, J: np.ndarray, residual: np.ndarray, steps: np.ndarray, seconds: float) -> np.ndarray:
+    """Per variable, whether a window ending at `seconds` could claim it: its
+    95 % interval from this Jacobian's rows up to then (and the residual's,
+    untared) within IDENTIFIABLE_WIDTH of its range. The information is a sum
+    over samples, so those rows hold what the shorter window would (at this
+    point), a rough column's more."""
+    keep = np.asarray(problem.times) <= float(seconds) + 1e-9
+    lo, hi = np.array(problem.bounds_array, float).T
+    if keep.sum() < 2:
+        return np.zeros(len(lo), bool)
+    sd = _sd(problem, np.asarray(J)[keep], np.asarray(residual)[keep], steps)
+    return np.array([_claimable(sd[k], lo[k], hi[k]) for k in range(len(lo))])
 
 
 def inside_stencil(x: Sequence[float], point: Sequence[float], steps: Sequence[float]) -> bool:

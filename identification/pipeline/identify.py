@@ -217,13 +217,15 @@ def _presolve(problem, evals: int, seed, journal, progress, f_tol, x_tol, worker
 
 
 def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Optional[Path],
-                stop_rough: bool = False) -> dict:
+                shorter: Optional[float] = None) -> dict:
     """The refinement and the intervals after the complex, kept in
     JOURNAL.local.json (atomically) for the resume of an interrupted run.
-    `stop_rough`: a shorter window follows where a CoR is rough here (the
-    shrink stage), so the refinement stops at its start where its first
-    Jacobian finds one rough (refine's stop_rough): the intervals would call
-    it rough after any refinement."""
+    `shorter`: the end (s) of the shorter window that follows where a CoR is
+    rough here and that window could claim it (the shrink stage,
+    identification.pipeline.windowing.troubles). The refinement then stops
+    at its start where its first Jacobian finds such a CoR (refine's
+    stop_rough and within): the intervals would call it rough after any
+    refinement. The intervals say which variables that window could claim."""
 
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
@@ -235,7 +237,7 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
     # f at the start, as this objective gives it: a refinement kept from an objective that has changed
     # since (journal.vouch) is not taken up
     key = {"start": point_key(x), "f_start": float(f), "refine_evals": int(refine_evals),
-           "uncertainty": bool(uncertainty), **({"stop_rough": True} if stop_rough else {})}
+           "uncertainty": bool(uncertainty), **({"shorter": float(shorter)} if shorter is not None else {})}
     if side is not None and side.exists():
         try:
             kept = json.loads(side.read_text())
@@ -249,9 +251,9 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
             pass  # unreadable: computed again
     out, sim, lin = {}, None, None
     if refine_evals > 0:
-        watch = [k for k, n in enumerate(problem.free) if n in CORS] if stop_rough else []
+        watch = [k for k, n in enumerate(problem.free) if n in CORS] if shorter is not None else []
         ref = refine(problem, x, max_evals=int(refine_evals), rel_step=REFINE_STEP, f_rtol=1e-4, central=True,
-                     stop_rough=watch)
+                     stop_rough=watch, within=shorter)
         out["refined"] = {"f_start": float(f), "f": float(ref.f), "nfev": int(ref.nfev),
                           "iterations": int(ref.iterations)}
         if ref.rough:
@@ -263,7 +265,7 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
             lin = (ref.at, ref.steps)   # the intervals take it where x is inside its stencil
     if uncertainty:
         try:
-            out["intervals"] = intervals(problem, x, sim, linearised=lin)
+            out["intervals"] = intervals(problem, x, sim, linearised=lin, shorter=shorter)
         except Exception as exc:  # no intervals rather than no result
             log.warning("%s: intervals failed: %s", problem.name, exc)
     if side is not None:

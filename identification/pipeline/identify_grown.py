@@ -230,8 +230,9 @@ def _once(problem, *, max_evals, seed, journal, refine_evals, uncertainty, shrin
     f = float(problem(x))
     tick("grown", f)   # on the whole record: the last window may be shorter (grow's `whole`)
     duration = float(problem.times[-1])
-    shorter = shrink and uncertainty and any(float(s) < duration - 1e-9 for s in ladder)
-    local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal, stop_rough=shorter)
+    below = [float(s) for s in ladder if float(s) < duration - 1e-9]
+    shorter = max(below) if shrink and uncertainty and below else None
+    local = local_stage(problem, x, f, int(refine_evals), uncertainty, journal, shorter=shorter)
     if local.get("f", np.inf) < f:
         x, f = np.asarray(local["x"], float), float(local["f"])
     nfev = int(info["nfev"]) + 1 + int((local.get("refined") or {}).get("nfev", 0))

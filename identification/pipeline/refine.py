@@ -20,7 +20,7 @@ import numpy as np
 
 from ..objective.jacobian import demean_columns, jacobian, one_sided_jacobian, weights
 from ..objective.problem import IdentificationProblem, tared
-from ..objective.uncertainty import ROUGH, noise_level
+from ..objective.uncertainty import ROUGH, claimable_within, noise_level
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +53,7 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
            f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None,
            steps: Optional[np.ndarray] = None, broyden: Union[bool, str] = False,
-           stop_rough: Sequence[int] = ()) -> Refined:
+           stop_rough: Sequence[int] = (), within: Optional[float] = None) -> Refined:
     """Levenberg-Marquardt from x within the problem's bounds, at most
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
@@ -74,7 +74,11 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     differences part by ROUGH of their mean or more, at its step and again
     at half of it, as the intervals test it) stop the refinement there, at
     the start point (`rough` names them): on that window the response to
-    them is chaotic, and no refinement makes the intervals call it smooth."""
+    them is chaotic, and no refinement makes the intervals call it smooth.
+    `within`: the end (s) of the shorter window that follows; a rough column
+    stops it only where that window could claim its variable
+    (uncertainty.claimable_within on this Jacobian's rows), since a
+    shorter window is taken for no other variable."""
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
@@ -102,6 +106,9 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 if it == 0 and stop_rough:
                     chaotic, spent = _still_rough(problem, x, sim, w, used, rough, stop_rough)
                     nfev += spent
+                    if chaotic and within is not None:
+                        later = claimable_within(problem, J, problem.samples - sim, used, within)
+                        chaotic = [k for k in chaotic if later[k]]
                     if chaotic:
                         log.info("refine: %s rough at the start: stopped there",
                                  ", ".join(problem.free[k] for k in chaotic))

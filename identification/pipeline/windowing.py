@@ -16,6 +16,12 @@ that length (`shrink_window`): past the onset of chaos the trail may have
 been carried off, the point before it has not. Nothing of the truth is used;
 the result says which windows were tried (`windows`) and its problem is the
 cut one (result.json `window_s`).
+
+A rough CoR that the next shorter window could not claim either is no
+trouble (`Interval.claimable_shorter`, from this window's Jacobian): a
+shorter window holds less of every variable, so shortening for it loses
+information on the others and gains nothing on it. On start-stops this is
+e_JR, which they do not determine at any length.
 """
 from __future__ import annotations
 
@@ -52,12 +58,15 @@ def truncated(problem, seconds: float):
 
 
 def troubles(result, names: Sequence[str] = CORS) -> list:
-    """Why the result's window is not to be trusted: the CoRs it is rough in,
-    and 'above the noise' when a likelihood fit stays above it (empty: fine).
-    Without intervals nothing is known, and nothing is reported."""
+    """Why the result's window is not to be trusted: the CoRs it is rough in
+    that the next shorter window could claim (all of them where that was not
+    asked), and 'above the noise' when a likelihood fit stays above it
+    (empty: fine). Without intervals nothing is known, and nothing is
+    reported."""
     if not result.intervals:
         return []
-    out = [iv.name for iv in result.intervals if iv.name in names and not iv.smooth]
+    out = [iv.name for iv in result.intervals
+           if iv.name in names and not iv.smooth and getattr(iv, "claimable_shorter", None) is not False]
     if any(iv.at_noise is False for iv in result.intervals):
         out.append("above the noise")
     return out
@@ -71,7 +80,7 @@ def shrink_window(problem, res, trail, ladder, refine_evals, journal, t0):
     tried = [{"window_s": full, "f": float(res.f), "troubles": troubles(res), "seconds": float(res.seconds)}]
     steps = [s for s in sorted({float(s) for s in ladder}, reverse=True) if s < full - 1e-9]
     start_t = float(problem.times[0])
-    for s in steps:
+    for i, s in enumerate(steps):
         if not tried[-1]["troubles"]:
             break
         t1 = time.time()
@@ -80,7 +89,8 @@ def shrink_window(problem, res, trail, ladder, refine_evals, journal, t0):
         q = truncated(problem, s)
         jr = None if journal is None else Path(journal).with_name(Path(journal).stem + f".w{s:g}.jsonl")
         f_start = float(q(x_start))
-        local = local_stage(q, x_start, f_start, refine_evals, True, jr, stop_rough=s > steps[-1])
+        local = local_stage(q, x_start, f_start, refine_evals, True, jr,
+                            shorter=steps[i + 1] if i + 1 < len(steps) else None)
         x, f = (np.asarray(local["x"], float), float(local["f"])) if local.get("f", np.inf) < f_start \
             else (x_start, f_start)
         extra = int((local.get("refined") or {}).get("nfev", 0)) + 1
