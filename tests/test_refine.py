@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from identification.objective.uncertainty import noise_bound
 from identification.pipeline.refine import refine
 
 
@@ -139,3 +140,74 @@ def test_broyden_and_carried_steps_reach_the_minimum_for_fewer_simulations():
     carried = refine(p, start, max_evals=300, central=True, f_rtol=1e-6, steps=full.steps)
     assert np.allclose(carried.x, full.x, rtol=1e-4, atol=1e-4)
     assert p.nsim < n_full, (p.nsim, n_full)
+
+
+class _Valley:
+    """Rosenbrock's valley as a record under the likelihood objective: two
+    channels carry 10 (b - a^2) and 1 - a on a waveform, a third carries a
+    misfit `floor` (in noise levels) that no (a, b) removes; declared noise on
+    all three. Levenberg-Marquardt creeps along the valley in small gains."""
+    free = ("a", "b")
+    objective = "likelihood"
+    tare = None
+
+    def __init__(self, floor: float, sigma: float = 0.05):
+        self.times = np.arange(0.0, 1.0, 1 / 300)
+        self.bounds_array = [(-2.0, 2.0), (-1.0, 3.0)]
+        self.u = np.sqrt(2.0) * np.sin(2 * np.pi * 3 * self.times)
+        self.sigma = sigma
+        self.noise = np.full(3, sigma)
+        self.samples = np.random.default_rng(11).normal(size=(len(self.times), 3)) * sigma
+        self.samples[:, 2] += floor * sigma * self.u
+        self.nsim = 0
+
+    def simulate(self, x):
+        self.nsim += 1
+        a, b = np.asarray(x, float)
+        s = np.zeros((len(self.times), 3))
+        s[:, 0] = -10.0 * (b - a * a) * self.u * self.sigma
+        s[:, 1] = -(1.0 - a) * self.u * self.sigma
+        return s
+
+
+VALLEY_START = np.array([-1.2, 1.0])
+
+
+def test_a_window_whose_pace_cannot_reach_the_noise_is_left_early():
+    """With a shorter window to follow, a refinement that at its average
+    gain so far could not bring f down to the noise within its budget stops
+    (the window will be cut); run to its end it stays above the noise too."""
+    p = _Valley(floor=10.0)
+    reach = noise_bound(p)
+    whole = refine(p, VALLEY_START, max_evals=150, central=True, f_rtol=1e-6, within=None, reach=reach)
+    assert not whole.short and whole.f > reach          # the last rung: it runs its course, above the noise
+    early = refine(p, VALLEY_START, max_evals=150, central=True, f_rtol=1e-6, within=0.5, reach=reach)
+    assert early.short and early.f > reach
+    assert early.nfev < 0.5 * whole.nfev, (early.nfev, whole.nfev)
+    # the rule as stated: the pace so far, kept up for the iterations left, falls short of `reach`
+    left = (150 - early.nfev) // (2 * len(p.free) + 1)
+    assert early.f - (early.f_start - early.f) / early.iterations * left > reach
+    assert early.f <= early.f_start
+
+
+def test_a_fit_that_reaches_the_noise_is_not_stopped():
+    """The same valley without the misfit: the gains bring f to the noise,
+    and the refinement is the one without the rule, bit for bit."""
+    p = _Valley(floor=0.0)
+    reach = noise_bound(p)
+    plain = refine(p, VALLEY_START, max_evals=150, central=True, f_rtol=1e-6)
+    ruled = refine(p, VALLEY_START, max_evals=150, central=True, f_rtol=1e-6, within=0.5, reach=reach)
+    assert plain.f <= reach
+    assert not ruled.short
+    assert np.array_equal(ruled.x, plain.x) and ruled.f == plain.f and ruled.nfev == plain.nfev
+
+
+def test_the_local_stage_before_a_shorter_window_leaves_a_hopeless_refinement():
+    from identification.pipeline.identify import local_stage
+    p = _Valley(floor=10.0)
+    f0 = float(np.sum(np.mean((p.samples - p.simulate(VALLEY_START)) ** 2, axis=0) / p.noise ** 2))
+    cut = local_stage(p, VALLEY_START, f0, 150, False, None, shorter=0.5)
+    last = local_stage(p, VALLEY_START, f0, 150, False, None)
+    assert cut["refined"].get("short_of_noise") is True
+    assert "short_of_noise" not in last["refined"]
+    assert cut["refined"]["nfev"] < last["refined"]["nfev"]

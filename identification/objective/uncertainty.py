@@ -210,11 +210,19 @@ def fit_at_noise(problem, r: np.ndarray) -> Optional[bool]:
     return at_noise(problem, float(np.sum(np.mean(r ** 2, axis=0) / np.asarray(problem.noise, float) ** 2)))
 
 
+def noise_bound(problem, z: float = AT_NOISE_Z, margin: float = AT_NOISE_MARGIN) -> Optional[float]:
+    """The largest f of the likelihood objective at the declared noise (the
+    test of fit_at_noise): the mean of chi^2 / n, `margin` of it and `z` sd
+    above it; None for the other objectives."""
+    if getattr(problem, "objective", "pointwise") != "likelihood":
+        return None
+    n, m = np.shape(problem.samples)
+    return float(m * (1.0 + margin) + z * np.sqrt(2.0 * m / n))
+
+
 def at_noise(problem, f: float, z: float = AT_NOISE_Z, margin: float = AT_NOISE_MARGIN) -> Optional[bool]:
     """The test of fit_at_noise on f itself (the likelihood objective's f is
     that sum), `z` sd and `margin` of the mean allowed above it; None for the
     other objectives."""
-    if getattr(problem, "objective", "pointwise") != "likelihood":
-        return None
-    n, m = np.shape(problem.samples)
-    return bool(f <= m * (1.0 + margin) + z * np.sqrt(2.0 * m / n))
+    bound = noise_bound(problem, z, margin)
+    return None if bound is None else bool(f <= bound)

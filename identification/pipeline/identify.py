@@ -31,7 +31,7 @@ from lss_fmu.design import CORS, LAYOUT_DEPENDENT, symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
 from ..objective.problem import LINEARISABLE, IdentificationProblem
-from ..objective.uncertainty import Interval, intervals
+from ..objective.uncertainty import Interval, intervals, noise_bound
 from ..optim.complex_rf import minimize_complex
 from ..optim.complex_rfp import minimize_complex_parallel
 from ..optim.journal import Journal, JournaledObjective, journaled_map, point_key
@@ -225,7 +225,10 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
     identification.pipeline.windowing.troubles). The refinement then stops
     at its start where its first Jacobian finds such a CoR (refine's
     stop_rough and within): the intervals would call it rough after any
-    refinement. The intervals say which variables that window could claim."""
+    refinement. The intervals say which variables that window could claim.
+    It also stops where its pace could not bring the fit down to the
+    declared noise within its budget (refine's `reach`): such a window is
+    cut."""
 
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
@@ -253,11 +256,13 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
     if refine_evals > 0:
         watch = [k for k, n in enumerate(problem.free) if n in CORS] if shorter is not None else []
         ref = refine(problem, x, max_evals=int(refine_evals), rel_step=REFINE_STEP, f_rtol=1e-4, central=True,
-                     stop_rough=watch, within=shorter)
+                     stop_rough=watch, within=shorter, reach=noise_bound(problem))
         out["refined"] = {"f_start": float(f), "f": float(ref.f), "nfev": int(ref.nfev),
                           "iterations": int(ref.iterations)}
         if ref.rough:
             out["refined"]["rough_at_start"] = [problem.free[k] for k in ref.rough]
+        if ref.short:
+            out["refined"]["short_of_noise"] = True
         if ref.f < f:
             out["x"], out["f"], sim = ref.x.tolist(), float(ref.f), ref.sim
             x = ref.x

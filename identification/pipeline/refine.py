@@ -38,6 +38,7 @@ class Refined:
                                         # when it was updated by Broyden's formula after that)
     rough: tuple = ()                   # stop_rough: the watched variables found rough at the start (it
                                         # stopped there)
+    short: bool = False                 # reach: stopped where its pace could not bring f down to `reach`
 
 
 def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> tuple:
@@ -53,7 +54,8 @@ def _residual(problem: IdentificationProblem, x: np.ndarray, sw: np.ndarray) -> 
 def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: float = 0.02,
            f_rtol: float = 1e-3, central: bool = False, channel_weights: Optional[np.ndarray] = None,
            steps: Optional[np.ndarray] = None, broyden: Union[bool, str] = False,
-           stop_rough: Sequence[int] = (), within: Optional[float] = None) -> Refined:
+           stop_rough: Sequence[int] = (), within: Optional[float] = None,
+           reach: Optional[float] = None) -> Refined:
     """Levenberg-Marquardt from x within the problem's bounds, at most
     `max_evals` simulations; stops when a step lowers f by less than `f_rtol`
     (relative) or no damping gives a lower f. A failed simulation ends it
@@ -78,7 +80,14 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     `within`: the end (s) of the shorter window that follows; a rough column
     stops it only where that window could claim its variable
     (uncertainty.claimable_within on this Jacobian's rows), since a
-    shorter window is taken for no other variable."""
+    shorter window is taken for no other variable. `reach` (with `within`):
+    the f below which the fit is at the declared noise
+    (uncertainty.noise_bound). A window left above it is cut, and its
+    refinement is thrown away with it. So the refinement stops once its
+    average gain per iteration so far, kept up for every iteration the
+    budget has left, would not bring f down to `reach` (`short`). A
+    Levenberg-Marquardt refinement's gains shrink as it converges, so this
+    pace overstates what is left, and the test errs towards going on."""
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
@@ -94,6 +103,7 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     span = np.where(hi > lo, hi - lo, 1.0)
     raw, fresh = None, True   # the Jacobian's columns; whether they were differenced at x
     at = None
+    per_iteration = (0 if broyden else per_jacobian) + 1   # at least: a Jacobian (unless updated) and one trial
     while nfev + (0 if not fresh else per_jacobian) + 1 <= max_evals:
         if fresh:
             if central:
@@ -156,6 +166,12 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
                 continue
             break
         fresh = not broyden
+        if within is not None and reach is not None and f > reach:
+            left = (max_evals - nfev) // per_iteration
+            if f - (f_start - f) / it * left > reach:
+                log.info("refine: f = %.4g after %d iterations, above the noise's %.4g, at %.3g an iteration for "
+                         "the %d left: stopped (the window will be cut)", f, it, reach, (f_start - f) / it, left)
+                return Refined(x, f, f_start, nfev, it, sim, steps, at, short=True)
     return Refined(x, f, f_start, nfev, it, sim, steps, at)
 
 
