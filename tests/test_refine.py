@@ -2,6 +2,8 @@
 loop (identification.pipeline.refine), on a stand-in problem without the FMU."""
 from __future__ import annotations
 
+import types
+
 import numpy as np
 
 from identification.objective.uncertainty import noise_bound
@@ -211,3 +213,27 @@ def test_the_local_stage_before_a_shorter_window_leaves_a_hopeless_refinement():
     assert cut["refined"].get("short_of_noise") is True
     assert "short_of_noise" not in last["refined"]
     assert cut["refined"]["nfev"] < last["refined"]["nfev"]
+
+
+def test_a_window_left_above_the_noise_before_a_shorter_one_differences_no_interval():
+    """Above the noise no interval is claimed whatever the Jacobian says; with
+    a shorter window to follow the window is cut, so none is differenced, and
+    the shrink stage's test (windowing.troubles) still calls it above the
+    noise. On the last rung the intervals are differenced as before."""
+    from identification.pipeline.identify import local_stage
+    from identification.pipeline.windowing import troubles
+    p = _Valley(floor=10.0)
+    f0 = float(np.sum(np.mean((p.samples - p.simulate(VALLEY_START)) ** 2, axis=0) / p.noise ** 2))
+    def simulations(**kw):
+        p.nsim = 0
+        out = local_stage(p, VALLEY_START, f0, 150, kw.pop("uncertainty"), None, **kw)
+        return out, p.nsim
+    cut, n_cut = simulations(uncertainty=True, shorter=0.5)
+    assert n_cut == simulations(uncertainty=False, shorter=0.5)[1]   # nothing simulated for the intervals
+    assert [iv.method for iv in cut["intervals"]] == ["none", "none"]
+    assert all(iv.at_noise is False and not iv.identifiable for iv in cut["intervals"])
+    assert troubles(types.SimpleNamespace(intervals=cut["intervals"])) == ["above the noise"]
+    last, n_last = simulations(uncertainty=True)
+    assert n_last > simulations(uncertainty=False)[1]   # differenced
+    assert [iv.method for iv in last["intervals"]] == ["jacobian", "jacobian"]
+    assert all(iv.at_noise is False and not iv.identifiable for iv in last["intervals"])

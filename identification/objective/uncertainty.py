@@ -145,6 +145,17 @@ def intervals(problem: IdentificationProblem, x: Sequence[float], sim: Optional[
     return out
 
 
+def above_noise(problem, x: Sequence[float]) -> list:
+    """One Interval per free variable, none claimed, for a fit above the
+    declared noise (at_noise False): there no interval is claimed whatever
+    the Jacobian says (see intervals), so none is differenced (method
+    "none"; its sd, smoothness and shorter window are not known)."""
+    x = np.asarray(x, float)
+    lo, hi = np.array(problem.bounds_array, float).T
+    return [Interval(name, float(x[k]), float("inf"), float(lo[k]), float(hi[k]), False, method="none",
+                     at_noise=False) for k, name in enumerate(problem.free)]
+
+
 def _claimable(sd: float, lo: float, hi: float) -> bool:
     """A 95 % interval of this sd is narrow enough to claim the variable."""
     return bool(np.isfinite(sd) and 2.0 * Z95 * sd <= IDENTIFIABLE_WIDTH * (hi - lo))

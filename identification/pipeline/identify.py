@@ -31,7 +31,7 @@ from lss_fmu.design import CORS, LAYOUT_DEPENDENT, symbol
 from lss_fmu.variables import FORCE_CHANNELS
 
 from ..objective.problem import LINEARISABLE, IdentificationProblem
-from ..objective.uncertainty import Interval, intervals, noise_bound
+from ..objective.uncertainty import Interval, above_noise, at_noise, intervals, noise_bound
 from ..optim.complex_rf import minimize_complex
 from ..optim.complex_rfp import minimize_complex_parallel
 from ..optim.journal import Journal, JournaledObjective, journaled_map, point_key
@@ -228,7 +228,8 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
     refinement. The intervals say which variables that window could claim.
     It also stops where its pace could not bring the fit down to the
     declared noise within its budget (refine's `reach`): such a window is
-    cut."""
+    cut. A fit left above the noise there claims no interval, and none is
+    differenced (uncertainty.above_noise)."""
 
     if getattr(problem, "objective", "pointwise") not in LINEARISABLE and (refine_evals > 0 or uncertainty):
         # both linearise the residual sample by sample: they mean nothing for a statistical objective
@@ -268,7 +269,10 @@ def local_stage(problem, x, f, refine_evals: int, uncertainty: bool, journal: Op
             x = ref.x
         if ref.at is not None and ref.steps is not None:
             lin = (ref.at, ref.steps)   # the intervals take it where x is inside its stencil
-    if uncertainty:
+    if uncertainty and shorter is not None and at_noise(problem, out.get("f", f)) is False:
+        # above the noise with a shorter window to follow: the window is cut (windowing.troubles)
+        out["intervals"] = above_noise(problem, x)
+    elif uncertainty:
         try:
             out["intervals"] = intervals(problem, x, sim, linearised=lin, shorter=shorter)
         except Exception as exc:  # no intervals rather than no result
