@@ -82,7 +82,8 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     (uncertainty.claimable_within on this Jacobian's rows), since a
     shorter window is taken for no other variable. `reach` (with `within`):
     the f below which the fit is at the declared noise
-    (uncertainty.noise_bound). A window left above it is cut, and its
+    (uncertainty.noise_bound; in the objective's own metric, so not with
+    `channel_weights`). A window left above it is cut, and its
     refinement is thrown away with it. So the refinement stops once its
     average gain per iteration so far, kept up for every iteration the
     budget has left, would not bring f down to `reach` (`short`). A
