@@ -89,6 +89,8 @@ def refine(problem: IdentificationProblem, x, *, max_evals: int = 60, rel_step: 
     budget has left, would not bring f down to `reach` (`short`). A
     Levenberg-Marquardt refinement's gains shrink as it converges, so this
     pace overstates what is left, and the test errs towards going on."""
+    if reach is not None and channel_weights is not None:
+        raise ValueError("refine: `reach` is an f of the objective's own metric, not of `channel_weights`")
     x = np.array(x, float)
     lo, hi = np.array(problem.bounds_array, float).T
     sw = np.sqrt(weights(problem) if channel_weights is None else np.asarray(channel_weights, float))
