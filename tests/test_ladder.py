@@ -89,7 +89,9 @@ def test_the_joint_fit_searches_the_rungs_beside_the_ranked_one(fmu_file):
     joint = widened("joint_clearance", ext)
     jlo, jhi = joint.bounds[GAP]
     assert np.isclose(jlo, lo / 1.5 ** 2) and np.isclose(jhi, hi * 1.5 ** 2)
-    xj, S_j, _, info = regrow(joint, x, joint.free, w, evals=60, seed=3)
+    # 120 complex evaluations on the first window: at 60 (12 per variable) the fit ended 9 % off the drawn
+    # gap on one right-hand-side path and within 5 % on another, a budget too small to settle on either
+    xj, S_j, _, info = regrow(joint, x, joint.free, w, evals=120, seed=3)
     assert abs(xj[-1] / 4e-6 - 1.0) < 0.05, (xj, info["windows"])
     assert S_j / ext.samples.size < 2.0, info["windows"]     # about 1 at the noise
     centred = recentred("joint_clearance", ext, xj)
