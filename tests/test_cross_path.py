@@ -8,6 +8,11 @@ the answer: the identified CoRs agree within a small part of their interval,
 the fit reaches the same objective, the loop gives the same verdict. The
 same comparison over every path and two other BLAS kernels, on longer
 records: benchmarks/bench_cross_path.py (docs/robustness.md).
+
+The loop's case is marked slow: it is two closed loops (7.5 CPU-minutes
+where the two paths are scalar and AVX2), a third of `make test`'s wall time
+on two cores, and the loop reaches the path only through the identifications
+the first case compares.
 """
 from __future__ import annotations
 
@@ -60,6 +65,7 @@ def test_identification_agrees_across_paths(two_paths, rig_record):
     assert max(a.f, b.f) <= F_RATIO * min(a.f, b.f), (a.f, b.f)
 
 
+@pytest.mark.slow
 def test_loop_verdict_agrees_across_paths(two_paths):
     """The closed loop on a release transient with the transducer cart a
     quarter heavier (an effect the CoRs absorb: catalogue.ABSORBED, fitted
