@@ -66,7 +66,7 @@ def troubles(result, names: Sequence[str] = CORS) -> list:
     if not result.intervals:
         return []
     out = [iv.name for iv in result.intervals
-           if iv.name in names and not iv.smooth and getattr(iv, "claimable_shorter", None) is not False]
+           if iv.name in names and not iv.smooth and iv.claimable_shorter is not False]
     if any(iv.at_noise is False for iv in result.intervals):
         out.append("above the noise")
     return out
