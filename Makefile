@@ -27,7 +27,7 @@ demo: fmu
 	$(VENV)/bin/lss demo --out demo_out
 
 # make test leaves out the long cases marked slow (each repeats what a faster case checks on
-# another record, seed or optimisation level); make test-slow runs them (about 55 CPU-min)
+# another record, seed, optimisation level or code path); make test-slow runs them (about an hour of CPU)
 test: fmu
 	$(VPY) -m pytest -q -p no:cacheprovider --durations=25 -n $(JOBS) --dist worksteal -m "not slow" tests
 
