@@ -33,18 +33,13 @@ import pytest
 
 from lss_fmu import build
 
+import c_objects
+
 CC = os.environ.get("CC", "gcc")
 CYCLES = 1000
 # one internal step per run: the cycle's cost is then the FMU's life cycle,
 # not the physics (0.05 s of simulated time would cost ~0.5 s per cycle here)
 STOP = STEP = 1e-4
-
-
-def _sources() -> list[Path]:
-    build.generate()
-    if not (build.GEN / "lss_guid.h").exists():
-        build.build_fmu(quiet=True)
-    return [build.TESTING / "test_harness.c", *build.model_sources(), build.GEN / "lss_vars.c"]
 
 
 def _sanitizer_works(flags: list[str], tmp: Path) -> bool:
@@ -55,13 +50,8 @@ def _sanitizer_works(flags: list[str], tmp: Path) -> bool:
     return res.returncode == 0 and subprocess.run([str(exe)], capture_output=True).returncode == 0
 
 
-def compile_harness(out: Path, flags: list[str]) -> Path:
-    cmd = [CC, "-std=c11", "-g", "-Wall", "-Wextra", "-Werror", *flags,
-           "-I", str(build.GEN), "-I", str(build.SRC), "-I", str(build.fmi_headers()),
-           "-o", str(out), *map(str, _sources()), "-lm", "-lpthread"]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    assert res.returncode == 0, f"harness does not compile:\n{' '.join(cmd)}\n{res.stderr}"
-    return out
+def compile_harness(out: Path, flags: list[str], objects: Path) -> Path:
+    return c_objects.link(out, build.TESTING / "test_harness.c", flags, objects, libs=("-lm", "-lpthread"))
 
 
 def resource_uri() -> str:
@@ -81,6 +71,11 @@ def workdir(tmp_path_factory):
     return tmp_path_factory.mktemp("harness")
 
 
+@pytest.fixture(scope="module")
+def objects(tmp_path_factory):
+    return c_objects.shared_dir(tmp_path_factory)
+
+
 def paths_used(stdout: str) -> dict:
     """solver.vector_path_used counted by the harness: {1: scalar, 2: avx2, 3: avx512}."""
     line = [ln for ln in stdout.splitlines() if ln.startswith("vector paths used:")][-1]
@@ -95,11 +90,11 @@ def assert_every_path_ran(stdout: str, best: int) -> None:
 
 
 @pytest.mark.parametrize("level", [pytest.param("-O0", marks=pytest.mark.slow), "-O1"])
-def test_harness_under_asan_ubsan(workdir, best_vector_path, level):
+def test_harness_under_asan_ubsan(workdir, objects, best_vector_path, level):
     flags = [level, "-fno-omit-frame-pointer", "-fsanitize=address,undefined", "-fno-sanitize-recover=all"]
     if not _sanitizer_works(flags, workdir):
         pytest.skip("the compiler has no AddressSanitizer/UBSan runtime")
-    exe = compile_harness(workdir / f"harness_asan{level}", flags)
+    exe = compile_harness(workdir / f"harness_asan{level}", flags, objects)
     env = dict(os.environ, ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:detect_stack_use_after_return=1",
                UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1")
     res = subprocess.run([str(exe), resource_uri(), "--cycles", str(CYCLES), "--stop", str(STOP),
@@ -124,11 +119,11 @@ def test_harness_under_asan_ubsan(workdir, best_vector_path, level):
     assert_every_path_ran(res.stdout, best_vector_path)
 
 
-def test_threads_under_tsan(workdir, best_vector_path):
+def test_threads_under_tsan(workdir, objects, best_vector_path):
     flags = ["-O1", "-fsanitize=thread"]
     if not _sanitizer_works(flags + ["-lpthread"], workdir):
         pytest.skip("the compiler has no ThreadSanitizer runtime")
-    exe = compile_harness(workdir / "harness_tsan", flags)
+    exe = compile_harness(workdir / "harness_tsan", flags, objects)
     res = subprocess.run([str(exe), resource_uri(), "--threads", "4", "--stop", "0.002", "--step", "0.001"],
                          capture_output=True, text=True, env=dict(os.environ, TSAN_OPTIONS="halt_on_error=1"),
                          timeout=600)

@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lss_fmu import build
-
+import c_objects
 from conftest import VECTOR_PATHS
 from test_c_harness import _sanitizer_works, resource_uri
 
@@ -44,12 +43,6 @@ ENV = dict(os.environ, ASAN_OPTIONS="detect_leaks=1:halt_on_error=1:detect_stack
 # -O0 also with the stack protector (Ubuntu's GCC default): with ASan's fake stack GCC 12 misplaced
 # the AVX-512 kernels' 64-byte locals by the guard (chain_simd_kernel.h)
 LEVELS = {"-O0": ["-O0", "-fstack-protector-strong"], "-O1": ["-O1"]}
-
-
-def _compile_cmd(out: Path, flags: list[str]) -> list[str]:
-    return [CC, "-std=c11", "-g", "-Wall", "-Wextra", "-Werror", *flags, "-I", str(build.GEN), "-I", str(build.SRC),
-            "-I", str(build.fmi_headers()), "-o", str(out), str(DRIVER), *map(str, build.model_sources()),
-            str(build.GEN / "lss_vars.c"), "-lm"]
 
 
 def _run(exe: Path, cases: list[str]) -> dict:
@@ -68,11 +61,8 @@ def _run(exe: Path, cases: list[str]) -> dict:
     return dict(names=names, runs=runs)
 
 
-def _compile(work: Path, level: str, flags: list[str]) -> Path:
-    exe = work / f"run{level}"
-    res = subprocess.run(_compile_cmd(exe, flags), capture_output=True, text=True, timeout=900)
-    assert res.returncode == 0, f"{level} build of tests/c/vector_paths_run.c failed:\n{res.stderr}"
-    return exe
+def _compile(work: Path, objects: Path, level: str, flags: list[str]) -> Path:
+    return c_objects.link(work / f"run{level}", DRIVER, flags, objects)
 
 
 @pytest.fixture(scope="module")
@@ -82,16 +72,18 @@ def work(tmp_path_factory):
     work = tmp_path_factory.mktemp("vector_sanitizers")
     if not _sanitizer_works(["-O1", *ASAN], work):
         pytest.skip("the compiler has no AddressSanitizer/UBSan runtime")
-    build.generate()
-    if not (build.GEN / "lss_guid.h").exists():
-        build.build_fmu(quiet=True)
     return work
 
 
 @pytest.fixture(scope="module")
-def reference(work):
+def objects(tmp_path_factory):
+    return c_objects.shared_dir(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def reference(work, objects):
     """The -O2 build's results on every path, and the paths this CPU has."""
-    ref = _run(_compile(work, "-O2", ["-O2"]), [f"{lay}:{p}" for lay in LAYOUTS for p in VECTOR_PATHS])
+    ref = _run(_compile(work, objects, "-O2", ["-O2"]), [f"{lay}:{p}" for lay in LAYOUTS for p in VECTOR_PATHS])
     paths = [p for p in VECTOR_PATHS if all(ref["runs"][(lay, p)]["used"] == p for lay in LAYOUTS)]
     for p in VECTOR_PATHS:
         if p not in paths:
@@ -102,9 +94,9 @@ def reference(work):
 
 @pytest.mark.parametrize("level", [pytest.param(lv, marks=pytest.mark.slow) if lv == "-O0" else lv
                                    for lv in sorted(LEVELS)])
-def test_sanitized_build_runs_every_path_like_O2(work, reference, level):
+def test_sanitized_build_runs_every_path_like_O2(work, objects, reference, level):
     ref, paths = reference
-    exe = _compile(work, level, [*LEVELS[level], *ASAN])
+    exe = _compile(work, objects, level, [*LEVELS[level], *ASAN])
     got = _run(exe, [f"{lay}:{p}" for lay in LAYOUTS for p in paths])
     assert got["names"] == ref["names"]
     names = ref["names"]
