@@ -34,8 +34,8 @@ import pytest
 from lss_fmu import build
 
 import c_objects
+from c_objects import CC
 
-CC = os.environ.get("CC", "gcc")
 CYCLES = 1000
 # one internal step per run: the cycle's cost is then the FMU's life cycle,
 # not the physics (0.05 s of simulated time would cost ~0.5 s per cycle here)

@@ -29,10 +29,10 @@ import numpy as np
 import pytest
 
 import c_objects
+from c_objects import CC
 from conftest import VECTOR_PATHS
 from test_c_harness import _sanitizer_works, resource_uri
 
-CC = os.environ.get("CC", "gcc")
 DRIVER = Path(__file__).parent / "c" / "vector_paths_run.c"
 # 0.1 s: every cart takes its element kind's kernel from the first step; longer adds time, not code
 STOP, STEP, TOL = 0.1, 0.001, 1e-6
